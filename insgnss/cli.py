@@ -1,0 +1,56 @@
+"""The ``insgnss`` command line.
+
+Sub-commands live in :mod:`insgnss.commands`, one module each, discovered automatically: a module
+defines ``NAME`` (the sub-command), ``HELP`` (one line) and ``register(parser)`` that adds its
+arguments and sets ``parser.set_defaults(func=run)`` where ``run(args) -> int``.
+The CLI only parses arguments, calls the pipeline and reports; :class:`InsgnssError` is printed
+without a traceback and the exit status is 2.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import pkgutil
+import sys
+
+from . import __version__, commands
+from .errors import InsgnssError
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="insgnss",
+        description="Inertial navigation and INS/GNSS integration toolkit "
+        "(ENU navigation frame, right-forward-up body frame, SI units).",
+    )
+    parser.add_argument("--version", action="version", version=f"insgnss {__version__}")
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND")
+    for info in sorted(pkgutil.iter_modules(commands.__path__), key=lambda m: m.name):
+        mod = importlib.import_module(f"{commands.__name__}.{info.name}")
+        if not hasattr(mod, "register"):
+            continue
+        p = sub.add_parser(mod.NAME, help=mod.HELP, description=(mod.__doc__ or mod.HELP).strip(),
+                           formatter_class=argparse.RawDescriptionHelpFormatter)
+        mod.register(p)
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    if not getattr(args, "func", None):
+        parser.print_help()
+        return 1
+    try:
+        return int(args.func(args) or 0)
+    except InsgnssError as exc:
+        print(f"insgnss {args.command}: error: {exc}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print(f"insgnss {args.command}: interrupted", file=sys.stderr)
+        return 130
+
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(main())

@@ -1,0 +1,1 @@
+"""Error-state Kalman filter, measurement models and RTS smoother."""

@@ -1,0 +1,1 @@
+"""Readers and writers of data formats; every reader returns insgnss-convention DataFrames."""

@@ -1,0 +1,1 @@
+"""Process models: LLF strapdown (forward and inverse) and RISS."""

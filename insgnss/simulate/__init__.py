@@ -1,0 +1,1 @@
+"""Simulation: trajectories, sensor errors, GNSS/odometer/magnetometer synthesis, scenarios."""
