@@ -169,7 +169,8 @@ def rotvec_to_dcm(phi) -> np.ndarray:
     small = a < 1e-8
     a_safe = np.where(small, 1.0, a)
     s = np.where(small, 1.0 - a * a / 6.0, np.sin(a_safe) / a_safe)
-    c = np.where(small, 0.5 - a * a / 24.0, (1.0 - np.cos(a_safe)) / a_safe**2)
+    # (1 - cos a) / a^2 written as 2 sin^2(a/2) / a^2: no cancellation for small angles
+    c = np.where(small, 0.5 - a * a / 24.0, 2.0 * (np.sin(0.5 * a_safe) / a_safe) ** 2)
     K = skew(phi)
     return np.eye(3) + s * K + c * (K @ K)
 
@@ -185,7 +186,8 @@ def rotvec_to_dcm_nb(phi, out):
     else:
         a = np.sqrt(a2)
         s = np.sin(a) / a
-        c = (1.0 - np.cos(a)) / a2
+        sh = np.sin(0.5 * a)
+        c = 2.0 * sh * sh / a2  # = (1 - cos a) / a^2 without cancellation
     out[0, 0] = 1.0 - c * (y * y + z * z)
     out[0, 1] = -s * z + c * x * y
     out[0, 2] = s * y + c * x * z

@@ -3,10 +3,10 @@
 
 Each forward step (see :mod:`.strapdown`) is inverted in closed form, vectorised over samples:
 
-- attitude: ``theta_lb = log(C_{k-1}^T C_k)`` (for the first-order update the angle is mapped
-  back by ``|theta| = 2 tan(|theta'| / 2)``), then ``dtheta = theta_lb + C_{k-1}^T w_il^l dt``;
-- velocity: ``dv = C_mid^T (v_k - v_{k-1} - (g^l - (2 w_ie^l + w_el^l) x v_{k-1}) dt)`` with
-  ``C_mid = C_{k-1} exp(theta_lb' / 2)``.
+- attitude: ``dtheta = log(C_{k-1}^T exp([zeta x]) C_k)`` with ``zeta = w_il^l dt`` (for the
+  first-order update the angle is mapped back by ``|theta| = 2 tan(|theta'| / 2)``);
+- velocity: ``dv = C_mid^T (v_k - v_{k-1} - (g^l - (2 w_ie^l + w_el^l) x v_mid) dt)`` with
+  ``C_mid = exp(-[zeta/2 x]) C_{k-1} exp([theta'/2 x])``.
 
 Position enters only through the Earth quantities at k-1. The forward run reproduces the
 position of the trajectory when the trajectory's position is the trapezoidal integral of its
@@ -70,18 +70,19 @@ def inverse_increments(t, lat, h, v, C, gravity_model="somigliana", attitude_upd
     wie = np.stack([np.zeros_like(la), OMEGA_E * clat, OMEGA_E * slat], -1)
     wel = np.stack([-vv[:, 1] / (M + hh), vv[:, 0] / (N + hh), vv[:, 0] * slat / clat / (N + hh)], -1)
     C0T = np.swapaxes(C0, 1, 2)
-    th_applied = dcm_to_rotvec(C0T @ C1)
-    th = th_applied
+    zeta = (wie + wel) * dt[:, None]
+    # C_k = exp(-zeta) C_{k-1} exp(theta)  ->  theta = log(C_{k-1}^T exp(zeta) C_k)
+    th_applied = dcm_to_rotvec(C0T @ rotvec_to_dcm(zeta) @ C1)
+    dth = th_applied
     if attitude_update_id(attitude_update) == ATTITUDE_FIRST_ORDER:
         a = np.linalg.norm(th_applied, axis=1)
         small = a < 1e-8
         a_safe = np.where(small, 1.0, a)
         scale = np.where(small, 1.0 + a * a / 12.0, 2.0 * np.tan(0.5 * a_safe) / a_safe)
-        th = th_applied * scale[:, None]
-    dth = th + np.einsum("kij,kj->ki", C0T, wie + wel) * dt[:, None]
-    Cmid = C0 @ rotvec_to_dcm(0.5 * th_applied)
+        dth = th_applied * scale[:, None]
+    Cmid = rotvec_to_dcm(-0.5 * zeta) @ C0 @ rotvec_to_dcm(0.5 * th_applied)
     g = earth.normal_gravity(la, hh, gravity_model)
-    acc = np.cross(2.0 * wie + wel, vv)
+    acc = np.cross(2.0 * wie + wel, 0.5 * (vv + v[1:]))  # Coriolis at the mid velocity
     rhs = (v[1:] - vv) + acc * dt[:, None]
     rhs[:, 2] += g * dt
     dvb = np.einsum("kji,kj->ki", Cmid, rhs)

@@ -80,7 +80,8 @@ AZIMUTH_MODES = {"level": AZIMUTH_LEVEL, "projected": AZIMUTH_PROJECTED, "exact"
 #: indices into the kernel state vector ``st``
 ST_LAT, ST_LON, ST_H, ST_VE, ST_VN, ST_VU, ST_A, ST_P, ST_R = range(9)
 #: indices into the sensor-error parameter vector ``par``
-PAR_ODO_SCALE, PAR_GYRO_BIAS_Z, PAR_ACCEL_BIAS_X, PAR_ACCEL_BIAS_Y = range(4)
+PAR_ODO_SCALE, PAR_GYRO_BIAS_Z, PAR_ACCEL_BIAS_X, PAR_ACCEL_BIAS_Y, PAR_GYRO_SCALE_Z = range(5)
+N_PAR = 5
 
 TWO_PI = 2.0 * np.pi
 
@@ -268,8 +269,9 @@ def riss_step(st, k, t, dthz, fx, fy, aod, vw, vbar, vod, par, gravity_model, az
     """Advance the RISS state ``st`` (see ``ST_*``) in place over interval k = (t[k-1], t[k]].
 
     ``par`` holds the sensor-error estimates (``PAR_*``: odometer scale, gyro z bias, accel x and
-    y biases); ``cols`` is a (5, 3) scratch array. ``aux`` (length >= 6) receives quantities of the
-    interval for the error model: ``[w_lb_z, v_mean, a_od, g, dA/dt, omega_il_bz]`` (corrected).
+    y biases, gyro z scale factor); ``cols`` is a (5, 3) scratch array. ``aux`` (length 8)
+    receives quantities of the interval for the error model (all compensated):
+    ``[w_lb_z, v_mean, a_od, g, dA/dt, w_il_bz, v_od(t[k]), w_z]``.
     """
     dt = t[k] - t[k - 1]
     lat, lon, h = st[ST_LAT], st[ST_LON], st[ST_H]
@@ -277,6 +279,7 @@ def riss_step(st, k, t, dthz, fx, fy, aod, vw, vbar, vod, par, gravity_model, az
     A0, p0, r0 = st[ST_A], st[ST_P], st[ST_R]
     s = 1.0 / (1.0 + par[PAR_ODO_SCALE])
     bgz = par[PAR_GYRO_BIAS_Z]
+    sg = 1.0 / (1.0 + par[PAR_GYRO_SCALE_Z])
     M, N = radii(lat)
     slat, clat = np.sin(lat), np.cos(lat)
     g = normal_gravity_id(lat, h, gravity_model)
@@ -306,13 +309,13 @@ def riss_step(st, k, t, dthz, fx, fy, aod, vw, vbar, vod, par, gravity_model, az
     p = np.arcsin(u)
     cp = np.cos(p)
     v_mean = vbar[k] * s
-    cent = s * (vw[k] - bgz * vbar[k]) - v_mean * wil_cent
+    cent = s * sg * (vw[k] - bgz * vbar[k]) - v_mean * wil_cent
     w = -(fx[k] - par[PAR_ACCEL_BIAS_X] + cent - cor_x) / (g * cp)
     w = min(1.0, max(-1.0, w))
     r = np.arcsin(w)
     cr = np.cos(r)
     # azimuth (eq. 3 and variants)
-    wz = dthz[k] / dt - bgz
+    wz = (dthz[k] / dt - bgz) * sg
     wil_up = wie_u + wel_u
     if az_mode == AZIMUTH_LEVEL:
         adot = -(wz - wil_up)
@@ -344,6 +347,8 @@ def riss_step(st, k, t, dthz, fx, fy, aod, vw, vbar, vod, par, gravity_model, az
     aux[3] = g
     aux[4] = adot
     aux[5] = wil_bz
+    aux[6] = vk
+    aux[7] = wz
 
 
 @njit(cache=True)
@@ -392,6 +397,7 @@ def mechanize_riss(
     odometer_scale: float = 0.0,
     gyro_bias_z: float = 0.0,
     accel_bias_xy: tuple[float, float] = (0.0, 0.0),
+    gyro_scale_z: float = 0.0,
     inputs: RissInputs | None = None,
 ) -> pd.DataFrame:
     """3D RISS mechanization of an IMU table and an odometer.
@@ -417,9 +423,10 @@ def mechanize_riss(
         Centred averaging window [s] for specific force, odometer acceleration and centripetal
         term (0: per IMU interval).
     gravity_model : {"somigliana", "grs80_series"}
-    odometer_scale, gyro_bias_z, accel_bias_xy
+    odometer_scale, gyro_bias_z, accel_bias_xy, gyro_scale_z
         Known sensor errors to compensate: odometer scale factor ``k`` (``v = v_od / (1 + k)``),
-        vertical gyro bias [rad/s], x and y accelerometer biases [m/s^2].
+        vertical gyro bias [rad/s], x and y accelerometer biases [m/s^2], vertical gyro scale
+        factor (``w = (w_z - b) / (1 + s)``).
     inputs : RissInputs, optional
         Pre-built inputs (skips :func:`riss_inputs`; ``imu``, ``odometer`` and ``window`` are
         then ignored).
@@ -433,7 +440,8 @@ def mechanize_riss(
     if inputs is None:
         inputs = riss_inputs(imu, odometer, window=window)
     st0 = initial_riss_state(initial)
-    par = np.array([odometer_scale, gyro_bias_z, accel_bias_xy[0], accel_bias_xy[1]], float)
+    par = np.array([odometer_scale, gyro_bias_z, accel_bias_xy[0], accel_bias_xy[1],
+                    gyro_scale_z], float)
     out = np.empty((len(inputs), 9))
     _riss_kernel(*inputs.arrays(), st0, par, earth.gravity_model_id(gravity_model),
                  azimuth_mode_id(azimuth), bool(coriolis), out)

@@ -1,0 +1,63 @@
+"""Benchmark: batch LLF strapdown mechanization throughput (IMU samples/s) and compile time.
+
+Run: ``python bench/bench_mechanize.py [--samples N]``. Prints numbers; not a timed test.
+The first call in a fresh process loads the numba cache (or compiles, when the cache is cold:
+``--cold`` deletes insgnss' numba cache files first and measures the compile time).
+"""
+
+from __future__ import annotations
+
+import argparse
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+
+def _setup(n: int):
+    from insgnss.imu import increments_table
+    from insgnss.mechanization.strapdown import NavState
+
+    rng = np.random.default_rng(0)
+    rate = 200.0
+    t = np.arange(n) / rate
+    dth = rng.normal(0, 1e-4, (n, 3))
+    dv = rng.normal(0, 1e-3, (n, 3)) + np.array([0, 0, 9.80665 / rate])
+    return increments_table(t, dth, dv), NavState.from_euler(0.7, 0.1, 100.0)
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__)
+    ap.add_argument("--samples", type=int, default=2_000_000)
+    ap.add_argument("--repeat", type=int, default=5)
+    ap.add_argument("--cold", action="store_true", help="measure compile time with an empty cache")
+    args = ap.parse_args()
+    if args.cold:
+        root = Path(__file__).resolve().parents[1] / "insgnss"
+        for p in list(root.rglob("*.nbi")) + list(root.rglob("*.nbc")):
+            p.unlink()
+    t0 = time.perf_counter()
+    from insgnss.mechanization.strapdown import mechanize
+
+    imu_small, x0 = _setup(10)
+    mechanize(imu_small, x0)
+    first = time.perf_counter() - t0
+    imu, x0 = _setup(args.samples)
+    best = np.inf
+    for _ in range(args.repeat):
+        t1 = time.perf_counter()
+        mechanize(imu, x0)
+        best = min(best, time.perf_counter() - t1)
+    print(f"first call (import + {'compile' if args.cold else 'cache load'}): {first:.2f} s")
+    print(f"mechanize: {args.samples:,} samples in {best:.3f} s (best of {args.repeat}) "
+          f"= {args.samples / best:,.0f} samples/s")
+    if not args.cold:
+        out = subprocess.run([sys.executable, __file__, "--cold", "--samples", "100000",
+                              "--repeat", "1"], capture_output=True, text=True)
+        print("cold start:", out.stdout.splitlines()[0] if out.stdout else out.stderr[-500:])
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,241 @@
+"""Initial alignment: accelerometer levelling, gyrocompassing, heading from GNSS velocity or a
+tilt-compensated magnetometer.
+
+Static coarse alignment (seed 000 eqs. 1-6; Noureldin et al. 2013 section 5.6; Groves 2013
+section 5.6). At rest the mean specific force and angular rate in the body frame (RFU) are::
+
+    f^b = C_l^b (0, 0, g)              ->  roll  = atan2(-f_x, f_z)
+                                           pitch = atan2(f_y, sqrt(f_x^2 + f_z^2))
+    w^b = C_l^b (0, we cos L, we sin L)  -> levelled w' = Rx(p) Ry(r) w^b  (eqs. 3-4)
+                                           heading = atan2(-w'_x, w'_y)    (eq. 5)
+
+(the seed's ``asin`` forms of eqs. 1-2 are equivalent for |tilt| < 90 deg; ``atan2`` keeps full
+precision near +-90 deg and needs no ``sign(f_z)``).
+
+Expected accuracy (Groves eqs. 5.107-5.108): the tilt error is dominated by the horizontal
+accelerometer bias, ``sigma_tilt ~ sigma_ba / g``; the heading error by the east gyro bias,
+``sigma_A ~ sigma_bg / (we cos L)`` (plus white-noise terms shrinking with sqrt(T)).
+
+Gyrocompassing needs a gyro bias well below the horizontal Earth rate (15 deg/h cos L): it
+works with navigation and tactical grades and is impossible with consumer MEMS gyros (biases of
+10-1000 deg/h). For those the heading comes from GNSS velocity once moving, a magnetometer, or is
+given; :func:`default_heading_source` picks per grade.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import pandas as pd
+
+from .attitude import Rx, Ry, euler_to_dcm
+from .earth import OMEGA_E, normal_gravity
+from .errors import AlignmentError
+from .imu import ACCEL_COLS, DTHETA_COLS, DV_COLS, GYRO_COLS, ImuErrorModel, is_increment_table
+
+#: largest gyro bias for which gyrocompassing is attempted, as a fraction of the horizontal
+#: Earth rate: at 0.1 the heading error is about 6 deg.
+GYROCOMPASS_MAX_BIAS_RATIO = 0.1
+
+
+@dataclass
+class AlignmentResult:
+    """Result of an alignment: angles [rad], their expected 1-sigma [rad], and the DCM."""
+
+    roll: float
+    pitch: float
+    heading: float
+    roll_std: float
+    pitch_std: float
+    heading_std: float
+    heading_source: str
+    time: float
+    C: np.ndarray
+
+    def as_degrees(self) -> dict:
+        return {k: float(np.degrees(getattr(self, k))) for k in
+                ("roll", "pitch", "heading", "roll_std", "pitch_std", "heading_std")}
+
+
+def level(f_mean) -> tuple[float, float]:
+    """Roll and pitch [rad] from the mean specific force in the body frame (RFU)."""
+    fx, fy, fz = np.asarray(f_mean, float)
+    return float(np.arctan2(-fx, fz)), float(np.arctan2(fy, np.hypot(fx, fz)))
+
+
+def gyrocompass(w_mean, roll: float, pitch: float) -> float:
+    """Heading [rad, 0..2pi) from the mean angular rate of a static IMU (seed eqs. 3-5)."""
+    wl = Rx(pitch) @ Ry(roll) @ np.asarray(w_mean, float)
+    return float(np.mod(np.arctan2(-wl[0], wl[1]), 2 * np.pi))
+
+
+def magnetic_heading(mag, roll: float, pitch: float, declination: float = 0.0) -> float:
+    """Tilt-compensated magnetometer heading [rad]; ``mag`` in the body frame (RFU), any unit.
+
+    The levelled field ``Rx(p) Ry(r) m`` has its horizontal part along magnetic north, so the
+    same formula as gyrocompassing applies; the declination (east positive) is added.
+    """
+    ml = Rx(pitch) @ Ry(roll) @ np.asarray(mag, float)
+    return float(np.mod(np.arctan2(-ml[0], ml[1]) + declination, 2 * np.pi))
+
+
+def heading_from_velocity(vel_e, vel_n, min_speed: float = 2.0):
+    """Course over ground [rad] from ENU velocity; NaN where the horizontal speed < min_speed.
+
+    Equals the vehicle heading for a land vehicle without side slip (body y = forward).
+    """
+    ve, vn = np.asarray(vel_e, float), np.asarray(vel_n, float)
+    hdg = np.mod(np.arctan2(ve, vn), 2 * np.pi)
+    return np.where(np.hypot(ve, vn) >= min_speed, hdg, np.nan)
+
+
+def can_gyrocompass(model: ImuErrorModel, lat: float) -> bool:
+    """True if the gyro bias is small enough for gyrocompassing at latitude ``lat``."""
+    horizontal = OMEGA_E * abs(np.cos(lat))
+    bias = np.hypot(model.gyro_bias, model.gyro_bias_instability)
+    return bool(bias < GYROCOMPASS_MAX_BIAS_RATIO * horizontal)
+
+
+def default_heading_source(model: ImuErrorModel, lat: float) -> str:
+    """``"gyrocompass"`` for navigation/tactical grades, ``"given"`` otherwise (consumer MEMS:
+    use a given heading, GNSS velocity or a magnetometer)."""
+    return "gyrocompass" if can_gyrocompass(model, lat) else "given"
+
+
+def _static_means(imu: pd.DataFrame) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, float]:
+    t = np.asarray(imu.index, float)
+    if t.size < 2:
+        raise AlignmentError("alignment window holds fewer than 2 IMU samples",
+                             expected=">= 2 samples", found=t.size)
+    if is_increment_table(imu):
+        dt = np.diff(t)[:, None]
+        w = imu[DTHETA_COLS].to_numpy(float)[1:] / dt
+        f = imu[DV_COLS].to_numpy(float)[1:] / dt
+    else:
+        w = imu[GYRO_COLS].to_numpy(float)
+        f = imu[ACCEL_COLS].to_numpy(float)
+    return w.mean(0), f.mean(0), w, f, float(t[-1] - t[0])
+
+
+def check_static(f: np.ndarray, w: np.ndarray, g: float, model: ImuErrorModel | None,
+                 dt: float, *, max_accel_std: float | None = None,
+                 max_rate: float | None = None, t0: float = 0.0) -> None:
+    """Raise :class:`AlignmentError` if the samples do not look static.
+
+    Thresholds: the specific-force norm must stay within ``max_accel_std`` of its mean
+    (default: 5x the white noise of ``model`` plus 0.05 m/s^2 for vibration), its mean must be
+    within 5 % of gravity, and the angular rate must vary by less than ``max_rate`` (default:
+    1 deg/s or 5x the white gyro noise, whichever is larger).
+    """
+    norm = np.linalg.norm(f, axis=1)
+    noise = 0.0 if model is None else model.accel_vrw / np.sqrt(dt)
+    lim_f = max_accel_std if max_accel_std is not None else 0.05 + 5.0 * noise
+    if abs(norm.mean() - g) > 0.05 * g:
+        raise AlignmentError(
+            f"mean specific-force norm {norm.mean():.3f} m/s^2 is not gravity ({g:.3f} m/s^2): "
+            "not static or accelerometer units wrong", expected="|f| ~ g", found=f"{norm.mean():.3f}")
+    if norm.std() > lim_f:
+        raise AlignmentError(
+            f"the alignment window starting at t={t0:.3f} s is not static: the specific-force "
+            f"norm varies by {norm.std():.3f} m/s^2 (1-sigma)",
+            expected=f"<= {lim_f:.3f} m/s^2", found=f"{norm.std():.3f} m/s^2")
+    gyro_noise = 0.0 if model is None else model.gyro_arw / np.sqrt(dt)
+    lim_w = max_rate if max_rate is not None else max(np.radians(1.0), 5.0 * gyro_noise)
+    wstd = float(np.sqrt(np.sum(np.var(w, axis=0))))
+    if wstd > lim_w:
+        raise AlignmentError(
+            f"the alignment window starting at t={t0:.3f} s is not static: the angular rate "
+            f"varies by {np.degrees(wstd):.2f} deg/s (1-sigma)",
+            expected=f"<= {np.degrees(lim_w):.2f} deg/s", found=f"{np.degrees(wstd):.2f} deg/s")
+
+
+def alignment_std(model: ImuErrorModel, lat: float, duration: float, g: float = 9.80665,
+                  heading_source: str = "gyrocompass") -> tuple[float, float, float]:
+    """Expected 1-sigma roll, pitch and heading errors [rad] of a static coarse alignment.
+
+    ``sigma_tilt = sqrt(sigma_ba^2 + VRW^2 / T) / g`` and, for gyrocompassing,
+    ``sigma_A = sqrt(sigma_bg^2 + ARW^2 / T) / (we cos L)`` combined with the tilt-induced term
+    ``sigma_tilt tan L`` (Groves eqs. 5.107-5.108). Other heading sources return NaN for the
+    heading (their accuracy depends on the source).
+    """
+    T = max(duration, 1e-9)
+    ba = np.hypot(model.accel_bias, model.accel_bias_instability)
+    tilt = np.sqrt(ba**2 + model.accel_vrw**2 / T) / g
+    if heading_source != "gyrocompass":
+        return float(tilt), float(tilt), float("nan")
+    bg = np.hypot(model.gyro_bias, model.gyro_bias_instability)
+    hdg = np.sqrt((bg**2 + model.gyro_arw**2 / T) / (OMEGA_E * np.cos(lat)) ** 2
+                  + (tilt * np.tan(lat)) ** 2)
+    return float(tilt), float(tilt), float(hdg)
+
+
+def coarse_align(
+    imu: pd.DataFrame,
+    lat: float,
+    height: float = 0.0,
+    *,
+    model: ImuErrorModel | None = None,
+    heading: float | None = None,
+    heading_source: str | None = None,
+    mag=None,
+    declination: float = 0.0,
+    gravity_model: str = "somigliana",
+    check: bool = True,
+) -> AlignmentResult:
+    """Static coarse alignment over all samples of ``imu`` (select the window before calling).
+
+    Parameters
+    ----------
+    imu : DataFrame
+        Static IMU samples (rates or increments, body RFU).
+    lat, height : float
+        Position [rad, m].
+    model : ImuErrorModel, optional
+        IMU error model, used for the reported standard deviations, the stillness test and
+        the default heading source. Without it the stds are NaN and gyrocompassing is used.
+    heading : float, optional
+        Given heading [rad] (``heading_source="given"``).
+    heading_source : {"gyrocompass", "given", "magnetometer"}, optional
+        Default: gyrocompass if the grade allows it (see :func:`default_heading_source`), else
+        "given" (then ``heading`` is required).
+    mag : array_like, optional
+        Mean magnetometer vector in body RFU for ``heading_source="magnetometer"``.
+    check : bool
+        Raise :class:`AlignmentError` if the window is not static.
+    """
+    w_mean, f_mean, w, f, T = _static_means(imu)
+    g = normal_gravity(lat, height, gravity_model)
+    if check:
+        dt = T / max(len(imu) - 1, 1)
+        check_static(f, w, g, model, dt, t0=float(imu.index[0]))
+    roll, pitch = level(f_mean)
+    if heading_source is None:
+        if heading is not None:
+            heading_source = "given"
+        elif mag is not None:
+            heading_source = "magnetometer"
+        else:
+            heading_source = "gyrocompass" if model is None else default_heading_source(model, lat)
+    if heading_source == "gyrocompass":
+        A = gyrocompass(w_mean, roll, pitch)
+    elif heading_source == "magnetometer":
+        if mag is None:
+            raise AlignmentError("heading_source='magnetometer' needs the magnetometer vector")
+        A = magnetic_heading(mag, roll, pitch, declination)
+    elif heading_source == "given":
+        if heading is None:
+            raise AlignmentError(
+                "gyrocompassing is impossible with this IMU grade (gyro bias above 10 % of the "
+                "horizontal Earth rate): give an initial heading, a magnetometer or use GNSS "
+                "velocity heading", expected="heading=...", found="none")
+        A = float(np.mod(heading, 2 * np.pi))
+    else:
+        raise AlignmentError(f"unknown heading source {heading_source!r}",
+                             expected="gyrocompass, given or magnetometer", found=heading_source)
+    if model is None:
+        stds = (np.nan, np.nan, np.nan)
+    else:
+        stds = alignment_std(model, lat, T, g, heading_source)
+    return AlignmentResult(roll, pitch, A, *stds, heading_source=heading_source,
+                           time=float(imu.index[-1]), C=euler_to_dcm(roll, pitch, A))

@@ -1,0 +1,73 @@
+"""Earth model: known values and internal consistency."""
+
+import numpy as np
+import pytest
+
+from insgnss import earth
+
+
+def test_normal_gravity_known_values():
+    # WGS84 Somigliana: equator/pole by construction; 45 deg from the published k = 0.00193185265241
+    assert earth.normal_gravity(0.0, 0.0) == pytest.approx(9.7803253359, abs=1e-9)
+    assert earth.normal_gravity(np.pi / 2, 0.0) == pytest.approx(9.8321849378, abs=1e-9)
+    assert earth.normal_gravity(np.radians(45), 0.0) == pytest.approx(9.806197769, abs=1e-9)
+
+
+def test_gravity_models_agree_and_height_gradient():
+    lat = np.radians(np.linspace(-89, 89, 50))
+    for h in (0.0, 1000.0, 10000.0):
+        a = earth.normal_gravity(lat, h, "somigliana")
+        b = earth.normal_gravity(lat, h, "grs80_series")
+        assert np.max(np.abs(a - b)) < 2e-5  # GRS80 vs WGS84 ellipsoid: ~1e-6 m/s^2 level
+    # free-air gradient about -3.086e-6 1/s^2
+    grad = earth.normal_gravity(0.7, 100.0) - earth.normal_gravity(0.7, 0.0)
+    assert grad / 100.0 == pytest.approx(-3.086e-6, rel=0.01)
+
+
+def test_radii_known_values():
+    M, N = earth.radii(0.0)
+    assert N == pytest.approx(earth.A)
+    assert M == pytest.approx(earth.A * (1 - earth.E2))
+    M, N = earth.radii(np.pi / 2)
+    assert M == pytest.approx(N)
+    assert N == pytest.approx(earth.A / np.sqrt(1 - earth.E2))
+
+
+def test_ecef_roundtrip_and_known_point():
+    x, y, z = earth.geodetic_to_ecef(0.0, 0.0, 0.0)
+    assert (x, y, z) == pytest.approx((earth.A, 0.0, 0.0))
+    rng = np.random.default_rng(1)
+    lat = rng.uniform(-np.pi / 2 + 1e-6, np.pi / 2 - 1e-6, 1000)
+    lon = rng.uniform(-np.pi, np.pi, 1000)
+    h = rng.uniform(-500, 20000, 1000)
+    lat2, lon2, h2 = earth.ecef_to_geodetic(*earth.geodetic_to_ecef(lat, lon, h))
+    assert np.max(np.abs(lat2 - lat)) < 1e-12
+    assert np.max(np.abs(np.angle(np.exp(1j * (lon2 - lon))))) < 1e-12
+    assert np.max(np.abs(h2 - h)) < 1e-6
+
+
+def test_enu_roundtrip_and_direction():
+    lat0, lon0, h0 = np.radians(45.0), np.radians(7.0), 100.0
+    M, N = earth.radii(lat0)
+    e, n, u = earth.geodetic_to_enu(lat0 + 1e-5, lon0, h0, lat0, lon0, h0)
+    assert n == pytest.approx(1e-5 * (M + h0), rel=1e-4) and abs(e) < 1e-6
+    e, n, u = earth.geodetic_to_enu(lat0, lon0 + 1e-5, h0, lat0, lon0, h0)
+    assert e == pytest.approx(1e-5 * (N + h0) * np.cos(lat0), rel=1e-4)
+    pts = np.array([[100.0, -50.0, 3.0], [1e4, 2e4, -30.0]])
+    lat, lon, h = earth.enu_to_geodetic(pts[:, 0], pts[:, 1], pts[:, 2], lat0, lon0, h0)
+    back = np.column_stack(earth.geodetic_to_enu(lat, lon, h, lat0, lon0, h0))
+    assert np.max(np.abs(back - pts)) < 1e-6
+
+
+def test_rates():
+    lat = np.radians(30.0)
+    wie = earth.earth_rate_l(lat)
+    assert np.linalg.norm(wie) == pytest.approx(earth.OMEGA_E)
+    assert wie[0] == 0.0 and wie[1] > 0 and wie[2] > 0
+    M, N = earth.radii(lat)
+    w = earth.transport_rate_l(lat, 0.0, np.array([10.0, 20.0, 0.0]))
+    assert w == pytest.approx([-20.0 / M, 10.0 / N, 10.0 * np.tan(lat) / N])
+
+
+def test_schuler_period():
+    assert earth.schuler_period(np.radians(45)) / 60 == pytest.approx(84.4, abs=0.2)
