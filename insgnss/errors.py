@@ -76,3 +76,28 @@ class AlignmentError(InsgnssError):
 
 class FilterHealthError(InsgnssError):
     """The Kalman filter became non-finite, non-positive-definite, or its NIS ran away."""
+
+
+class RateMismatchError(InsgnssError):
+    """The measured sample rate does not match the declared rate."""
+
+
+class InsgnssWarning(UserWarning):
+    """A problem insgnss repaired or tolerated (bridged gap, dropped duplicate, trimmed epoch).
+
+    Emitted with :func:`warnings.warn`; carries the same location fields as
+    :class:`InsgnssError`. The reader that warns also records what it did in the table's
+    ``attrs`` (e.g. ``attrs["gaps"]``, ``attrs["dropped_duplicates"]``).
+    """
+
+    def __init__(self, message: str, *, file=None, row: int | None = None, column=None,
+                 expected=None, found=None):
+        self.message = message
+        self.file = None if file is None else str(file)
+        self.row = row
+        self.column = column
+        self.expected = expected
+        self.found = found
+        super().__init__(self._format())
+
+    _format = InsgnssError._format

@@ -1,0 +1,246 @@
+"""Trajectory outputs: native CSV (and its validated reader), scorer CSV, KML and GeoJSON tracks.
+
+All writers are atomic (:func:`insgnss.io.native.atomic_write`: temporary file + rename, so a
+crash leaves the previous file or nothing under the final name) and refuse to overwrite any
+path listed in ``protect`` (the run's inputs, :func:`insgnss.validate.ensure_not_input`).
+
+- **Trajectory CSV** (native, :mod:`insgnss.io.native`): ``time`` then the table's columns,
+  angles in degrees with a ``_deg`` suffix, NaN written as ``nan``; 15 significant digits so
+  that GPS-second times keep 10 us.
+- **Scorer CSV** (``shared/eval`` input): ``time_gpst_s lat_deg lon_deg height_m`` and, when the
+  table has attitude, ``roll_deg pitch_deg yaw_deg`` (FRD body relative to NED, via
+  :func:`insgnss.attitude.euler_to_ned`).
+- **KML 2.2**: one ``LineString`` placemark per track (``lon,lat,height`` in degrees and metres;
+  KML heights are above mean sea level, so the default altitude mode clamps to the ground) and
+  optional point placemarks (e.g. GNSS epochs).
+- **GeoJSON** (RFC 7946): a FeatureCollection with one ``LineString`` feature per track and an
+  optional ``MultiPoint`` feature; positions ``[lon, lat, height]``.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import xml.etree.ElementTree as ET
+from collections.abc import Mapping, Sequence
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from ..attitude import euler_to_ned
+from ..errors import ConfigError, InputFormatError, InvalidValueError
+from ..validate import (
+    check_finite,
+    check_range,
+    check_time_order,
+    ensure_not_input,
+    finish_attrs,
+    parse_numeric,
+    read_text,
+    split_lines,
+)
+from .gpstime import to_gps_seconds
+from .native import atomic_write, from_file_columns, to_file_columns
+
+KML_NS = "http://www.opengis.net/kml/2.2"
+ALTITUDE_MODES = ("clampToGround", "relativeToGround", "absolute")
+
+
+def _need(df: pd.DataFrame, cols: Sequence[str], what: str) -> None:
+    missing = [c for c in cols if c not in df.columns]
+    if missing:
+        raise InputFormatError(f"table lacks columns for {what}", column=missing[0],
+                               expected=", ".join(cols), found=", ".join(map(str, df.columns)))
+
+
+def _llh_deg(df: pd.DataFrame, name: str) -> np.ndarray:
+    """(N, 3) lon, lat [deg], height [m]; refuses non-finite values (row = 1-based sample)."""
+    _need(df, ["lat", "lon", "height"], name)
+    v = np.column_stack([np.degrees(df["lon"].to_numpy(float)),
+                         np.degrees(df["lat"].to_numpy(float)), df["height"].to_numpy(float)])
+    if not len(v):
+        raise InputFormatError(f"no samples in {name}", expected="at least one sample", found="0")
+    ok = np.isfinite(v)
+    if not ok.all():
+        i, j = np.argwhere(~ok)[0]
+        raise InvalidValueError(f"non-finite position in {name}", row=int(i) + 1,
+                                column=("lon", "lat", "height")[j],
+                                expected="finite values", found=str(v[i, j]))
+    return v
+
+
+def write_trajectory_csv(df: pd.DataFrame, path: str | os.PathLike, *,
+                         protect: Sequence[str | os.PathLike] = (),
+                         float_format: str = "%.15g") -> Path:
+    """Write a time-indexed table as a native insgnss CSV (atomically)."""
+    ensure_not_input(path, protect)
+    out = to_file_columns(df)
+    out.index = pd.Index(np.asarray(df.index, float), name="time")
+    return atomic_write(path, lambda p: out.to_csv(p, float_format=float_format, na_rep="nan"))
+
+
+def read_trajectory_csv(path: str | os.PathLike, *, required: Sequence[str] = ("lat", "lon", "height"),
+                        duplicates: str = "error") -> pd.DataFrame:
+    """Read a native insgnss CSV with full validation (radians inside).
+
+    Empty cells and ``nan`` are NaN; NaN/inf are errors in ``time`` and the ``required``
+    columns only. Time must increase strictly.
+    """
+    rows = split_lines(read_text(path), path, comment=("#",), header=True)
+    head = [h.strip() for h in rows.header.split(",")]
+    if not head or head[0] != "time":
+        raise InputFormatError("first column must be 'time'", file=path, row=rows.header_line,
+                               column=head[0] if head else None, expected="'time'",
+                               found=", ".join(head))
+    if len(set(head)) != len(head):
+        dup = next(h for h in head if head.count(h) > 1)
+        raise InputFormatError("duplicated column name", file=path, row=rows.header_line,
+                               column=dup, expected="unique names", found=", ".join(head))
+    file_names = [f"{c}_deg" if f"{c}_deg" in head else c for c in required]
+    for want, c in zip(required, file_names, strict=True):
+        if c not in head:
+            raise InputFormatError("missing column", file=path, row=rows.header_line, column=want,
+                                   expected=f"a column {want!r} (or {want + '_deg'!r})",
+                                   found=", ".join(head))
+    rows.lines = [",".join(f if f.strip() else "nan" for f in s.split(","))
+                  if (",," in s or s.endswith(",") or s.startswith(",")) else s for s in rows.lines]
+    v = parse_numeric(rows, head, delimiter=",")
+    idx = [0] + [head.index(c) for c in file_names]
+    check_finite(v[:, idx], [head[i] for i in idx], rows.line_no, path)
+    for c, lim in (("lat_deg", 90.0), ("lon_deg", 360.0)):
+        if c in head:
+            check_range(v[:, head.index(c)], -lim, lim, c, rows.line_no, path, unit="deg")
+    keep, dropped = check_time_order(v[:, 0], rows.line_no, path, duplicates=duplicates)
+    df = pd.DataFrame(v[keep, 1:], index=pd.Index(v[keep, 0], name="time"), columns=head[1:])
+    df = from_file_columns(df)
+    return finish_attrs(df, file=path, fmt="native", time_base="unspecified",
+                        line_no=rows.line_no[keep], dropped_duplicates=dropped)
+
+
+def write_eval_csv(df: pd.DataFrame, path: str | os.PathLike, *, week: int | None = None,
+                   protect: Sequence[str | os.PathLike] = ()) -> Path:
+    """Write the scorer's CSV (``shared/eval/README.md``): GPS seconds, degrees, metres.
+
+    The time is converted from ``attrs["time_base"]`` (``"sow"`` needs ``week=`` or
+    ``attrs["gps_week"]``); tables without a declared base are written as they are.
+    """
+    ensure_not_input(path, protect)
+    llh = _llh_deg(df, "the scorer CSV")
+    base = df.attrs.get("time_base", "unspecified")
+    t = np.asarray(df.index, float)
+    if base in ("gps", "sow", "unix_gpst"):
+        wk = week if week is not None else df.attrs.get("gps_week")
+        if base == "sow" and wk is None:
+            raise ConfigError("seconds-of-week times need the GPS week", column="week",
+                              expected="week= or attrs['gps_week']", found="none")
+        t = to_gps_seconds(t, base, wk)
+    out = pd.DataFrame({"time_gpst_s": t, "lat_deg": llh[:, 1], "lon_deg": llh[:, 0],
+                        "height_m": llh[:, 2]})
+    if all(c in df.columns for c in ("roll", "pitch", "heading")):
+        r, p, y = euler_to_ned(df["roll"].to_numpy(float), df["pitch"].to_numpy(float),
+                               df["heading"].to_numpy(float))
+        out["roll_deg"], out["pitch_deg"], out["yaw_deg"] = np.degrees(r), np.degrees(p), np.degrees(y)
+    return atomic_write(path, lambda p: out.to_csv(p, index=False, float_format="%.10f"))
+
+
+def _rounded(v: np.ndarray) -> list:
+    return np.column_stack([np.round(v[:, :2], 9), np.round(v[:, 2], 3)]).tolist()
+
+
+def _tracks(tracks) -> dict[str, pd.DataFrame]:
+    if isinstance(tracks, pd.DataFrame):
+        return {"trajectory": tracks}
+    if isinstance(tracks, Mapping) and all(isinstance(v, pd.DataFrame) for v in tracks.values()):
+        return {str(k): v for k, v in tracks.items()}
+    raise ConfigError("tracks must be a DataFrame or a mapping name -> DataFrame", column="tracks",
+                      found=type(tracks).__name__)
+
+
+def _decimate(v: np.ndarray, every: int) -> np.ndarray:
+    if not isinstance(every, (int, np.integer)) or every < 1:
+        raise ConfigError("decimation must be a positive integer", column="decimate",
+                          found=repr(every))
+    if every == 1 or len(v) <= 2:
+        return v
+    idx = np.unique(np.concatenate([np.arange(0, len(v), every), [len(v) - 1]]))
+    return v[idx]
+
+
+def write_kml(tracks: pd.DataFrame | Mapping[str, pd.DataFrame], path: str | os.PathLike, *,
+              name: str = "insgnss", points: pd.DataFrame | None = None,
+              points_name: str = "GNSS", colors: Sequence[str] = ("ff0000ff", "ffff0000",
+                                                                   "ff00ff00", "ff00ffff"),
+              width: float = 2.0, altitude_mode: str = "clampToGround", decimate: int = 1,
+              protect: Sequence[str | os.PathLike] = ()) -> Path:
+    """Write tracks (and optional points) as a KML 2.2 document (atomically).
+
+    ``colors`` are KML ``aabbggrr`` strings used in turn per track; ``decimate`` keeps every
+    n-th sample (and the last).
+    """
+    if altitude_mode not in ALTITUDE_MODES:
+        raise ConfigError("unknown altitude mode", column="altitude_mode",
+                          expected=", ".join(ALTITUDE_MODES), found=repr(altitude_mode))
+    ensure_not_input(path, protect)
+    tr = _tracks(tracks)
+    ET.register_namespace("", KML_NS)
+    q = f"{{{KML_NS}}}"
+    kml = ET.Element(q + "kml")
+    doc = ET.SubElement(kml, q + "Document")
+    ET.SubElement(doc, q + "name").text = name
+    for k, (tname, df) in enumerate(tr.items()):
+        v = _decimate(_llh_deg(df, f"track {tname!r}"), decimate)
+        style = ET.SubElement(doc, q + "Style", id=f"track{k}")
+        ls = ET.SubElement(style, q + "LineStyle")
+        ET.SubElement(ls, q + "color").text = colors[k % len(colors)]
+        ET.SubElement(ls, q + "width").text = f"{width:g}"
+        pm = ET.SubElement(doc, q + "Placemark")
+        ET.SubElement(pm, q + "name").text = tname
+        ET.SubElement(pm, q + "styleUrl").text = f"#track{k}"
+        line = ET.SubElement(pm, q + "LineString")
+        ET.SubElement(line, q + "tessellate").text = "1"
+        ET.SubElement(line, q + "altitudeMode").text = altitude_mode
+        ET.SubElement(line, q + "coordinates").text = " ".join(
+            f"{a:.9f},{b:.9f},{c:.3f}" for a, b, c in v)
+    if points is not None:
+        v = _llh_deg(points, points_name)
+        folder = ET.SubElement(doc, q + "Folder")
+        ET.SubElement(folder, q + "name").text = points_name
+        for t, (a, b, c) in zip(np.asarray(points.index, float), v, strict=True):
+            pm = ET.SubElement(folder, q + "Placemark")
+            ET.SubElement(pm, q + "name").text = f"{t:.3f}"
+            pt = ET.SubElement(pm, q + "Point")
+            ET.SubElement(pt, q + "altitudeMode").text = altitude_mode
+            ET.SubElement(pt, q + "coordinates").text = f"{a:.9f},{b:.9f},{c:.3f}"
+    tree = ET.ElementTree(kml)
+    return atomic_write(path, lambda p: tree.write(p, encoding="UTF-8", xml_declaration=True))
+
+
+def write_geojson(tracks: pd.DataFrame | Mapping[str, pd.DataFrame], path: str | os.PathLike, *,
+                  points: pd.DataFrame | None = None, points_name: str = "GNSS",
+                  decimate: int = 1, protect: Sequence[str | os.PathLike] = ()) -> Path:
+    """Write tracks (and optional points) as a GeoJSON FeatureCollection (atomically)."""
+    ensure_not_input(path, protect)
+    features = []
+    for tname, df in _tracks(tracks).items():
+        v = _decimate(_llh_deg(df, f"track {tname!r}"), decimate)
+        t = np.asarray(df.index, float)
+        features.append({
+            "type": "Feature",
+            "properties": {"name": tname, "start_time": float(t[0]) if t.size else None,
+                           "end_time": float(t[-1]) if t.size else None,
+                           "time_base": df.attrs.get("time_base", "unspecified")},
+            "geometry": {"type": "LineString",
+                         "coordinates": _rounded(v)},
+        })
+    if points is not None:
+        v = _llh_deg(points, points_name)
+        features.append({
+            "type": "Feature",
+            "properties": {"name": points_name,
+                           "times": np.asarray(points.index, float).tolist()},
+            "geometry": {"type": "MultiPoint", "coordinates": _rounded(v)},
+        })
+    doc = {"type": "FeatureCollection", "features": features}
+    text = json.dumps(doc, allow_nan=False, separators=(",", ":"))
+    return atomic_write(path, lambda p: p.write_text(text))

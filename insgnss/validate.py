@@ -1,0 +1,654 @@
+"""Shared input validation: one implementation of every check the readers and the pipeline run.
+
+Every check locates the problem the way a user looks for it: the file, the **1-based line as an
+editor shows it** (header and comment lines count), the column (as named in the file, or a
+descriptive name for header-less formats), what was expected and what was found. One exception
+class per class of problem (:mod:`insgnss.errors`):
+
+=========================================  ===================================================
+problem                                    raised
+=========================================  ===================================================
+missing file, empty file, not text,        :class:`~insgnss.errors.InputFormatError`
+wrong field count, missing column,
+non-numeric cell, too few rows
+NaN / inf, value out of its valid range    :class:`~insgnss.errors.InvalidValueError`
+time going backwards, duplicated time      :class:`~insgnss.errors.TimeOrderError`
+(policy ``"error"``), epochs outside the
+IMU span
+gap longer than the policy bridges         :class:`~insgnss.errors.DataGapError`
+sample rate != declared rate               :class:`~insgnss.errors.RateMismatchError`
+magnitudes implausible for the declared    :class:`~insgnss.errors.UnitError`
+unit (accel in g declared m/s^2, gyro in
+deg/s declared rad/s)
+bad argument (unknown unit, policy, axis   :class:`~insgnss.errors.ConfigError`
+map), output path equal to an input
+=========================================  ===================================================
+
+Repairs the policies allow are announced with :class:`~insgnss.errors.InsgnssWarning` and
+recorded in the table's ``attrs``:
+
+- ``attrs["dropped_duplicates"]``: ``[{"row", "time"}]`` samples dropped because their time
+  stamp repeated the previous one (the first is kept);
+- ``attrs["gaps"]``: ``[{"row", "start", "end", "duration", "missing", "action"}]`` intervals
+  longer than ``GapPolicy.factor`` nominal intervals, ``action`` = ``"bridged"`` or ``"split"``;
+- ``attrs["segments"]``: ``[(t_start, t_end)]`` contiguous parts when long gaps split the data;
+- ``attrs["outside_imu_span"]``: ``[{"row", "time"}]`` GNSS epochs trimmed by
+  :func:`check_gnss_in_imu_span`.
+
+Gap policy (issue 8): intervals longer than ``factor`` (1.5) nominal sample intervals are gaps.
+Gaps up to ``max_bridge`` seconds (1.0 s) are bridged (the mechanization integrates across
+them) with a warning; longer gaps are handled by ``long``: ``"error"`` (default, stop with
+:class:`~insgnss.errors.DataGapError`), ``"split"`` (record segments; process each one) or
+``"bridge"``.
+
+Unit plausibility heuristics (only for the IMU, on the data converted to SI):
+
+- the median specific-force norm must lie in [0.5 g, 2 g] (any IMU on Earth measures about
+  1 g on average; data in g declared as m/s^2 gives about 1, increments give g * dt);
+- while the accelerometers are still (rolling std of the norm over 11 samples < 0.2 m/s^2 and
+  the norm within 10 % of g, at least 20 such samples), the median gyro norm must be below
+  0.5 rad/s (28.6 deg/s); a car's raw deg/s log declared as rad/s gives about 2 "rad/s" there,
+  real rad/s data at most about 0.1. Any rate above 100 rad/s is rejected outright.
+"""
+
+from __future__ import annotations
+
+import os
+import warnings
+from collections.abc import Iterable, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from .errors import (
+    ConfigError,
+    DataGapError,
+    InputFormatError,
+    InsgnssWarning,
+    InvalidValueError,
+    RateMismatchError,
+    TimeOrderError,
+    UnitError,
+)
+from .imu import G0
+
+# --------------------------------------------------------------------------------------------
+# warnings
+# --------------------------------------------------------------------------------------------
+
+
+def warn(message: str, *, file=None, row: int | None = None, column=None, expected=None,
+         found=None, stacklevel: int = 3) -> None:
+    """Emit an :class:`InsgnssWarning` carrying a location."""
+    warnings.warn(InsgnssWarning(message, file=file, row=row, column=column, expected=expected,
+                                 found=found), stacklevel=stacklevel)
+
+
+# --------------------------------------------------------------------------------------------
+# text files
+# --------------------------------------------------------------------------------------------
+
+
+@dataclass
+class TextRows:
+    """Data lines of a text file and where they are.
+
+    Attributes
+    ----------
+    file : Path
+    lines : list of str
+        Data lines, stripped, without blank and comment lines (and without the header).
+    line_no : (N,) int array
+        1-based line number of each data line as an editor shows it.
+    header : str or None
+        Header line (stripped) when one was requested.
+    header_line : int or None
+        Its line number.
+    comments : list of (int, str)
+        Comment lines and their line numbers (e.g. the RTKLIB ``%`` header).
+    """
+
+    file: Path
+    lines: list[str]
+    line_no: np.ndarray
+    header: str | None = None
+    header_line: int | None = None
+    comments: list[tuple[int, str]] = field(default_factory=list)
+
+
+def read_text(path: str | os.PathLike) -> str:
+    """Read a UTF-8 text file; missing, unreadable, empty or binary files raise InputFormatError."""
+    path = Path(path)
+    try:
+        data = path.read_bytes()
+    except FileNotFoundError:
+        raise InputFormatError("file not found", file=path) from None
+    except OSError as e:
+        raise InputFormatError(f"cannot read the file ({e.strerror or e})", file=path) from None
+    if not data.strip():
+        raise InputFormatError("file is empty", file=path, row=1, expected="data rows",
+                               found="no data")
+    nul = data.find(b"\x00")
+    if nul >= 0:
+        raise InputFormatError("binary data in a text file", file=path,
+                               row=data.count(b"\n", 0, nul) + 1, expected="UTF-8 text",
+                               found="a NUL byte")
+    try:
+        text = data.decode("utf-8")
+    except UnicodeDecodeError as e:
+        raise InputFormatError("not a UTF-8 text file", file=path,
+                               row=data.count(b"\n", 0, e.start) + 1, expected="UTF-8 text",
+                               found=f"byte 0x{data[e.start]:02x}") from None
+    return text.removeprefix("\ufeff")
+
+
+def split_lines(text: str, file, *, comment: tuple[str, ...] = ("#",), header: bool = False
+                ) -> TextRows:
+    """Split ``text`` into data lines with their editor line numbers.
+
+    Blank lines and lines starting with one of ``comment`` are skipped (kept in ``comments``).
+    With ``header=True`` the first remaining line is the header. Raises InputFormatError when no
+    data line remains.
+    """
+    raw = text.split("\n")
+    keep = []
+    comments = []
+    for i, line in enumerate(raw):
+        s = line.strip()
+        if not s:
+            continue
+        if comment and s.startswith(comment):
+            comments.append((i + 1, s))
+            continue
+        keep.append(i)
+    file = Path(file)
+    head = head_no = None
+    if header:
+        if not keep:
+            raise InputFormatError("no header line", file=file, row=1, expected="a header line",
+                                   found="only blank or comment lines")
+        head_no = keep[0] + 1
+        head = raw[keep[0]].strip()
+        keep = keep[1:]
+    if not keep:
+        row = (head_no + 1) if head_no else len(raw)
+        raise InputFormatError("no data rows", file=file, row=row, expected="at least one data row",
+                               found="none")
+    lines = [raw[i].strip() for i in keep]
+    return TextRows(file, lines, np.asarray(keep, dtype=np.int64) + 1, head, head_no, comments)
+
+
+def _strict_float(cell: str) -> float:
+    if "_" in cell:
+        raise ValueError(cell)
+    return float(cell)
+
+
+def parse_numeric(rows: TextRows, names: Sequence[str], *, delimiter: str | None = ",",
+                  usecols: Sequence[int] | None = None, ncols: int | None = None) -> np.ndarray:
+    """Parse the data lines of ``rows`` as a float matrix, locating any problem.
+
+    Parameters
+    ----------
+    rows : TextRows
+    names : sequence of str
+        Column names used in messages; ``names[j]`` names field ``usecols[j]`` (or field ``j``).
+    delimiter : str or None
+        Field separator; ``None`` splits on runs of whitespace.
+    usecols : sequence of int, optional
+        Fields to parse (0-based); other fields are not checked except for their count.
+    ncols : int, optional
+        Exact number of fields every line must have (default: ``len(names)`` without
+        ``usecols``; with ``usecols`` at least ``max(usecols) + 1``).
+
+    Returns
+    -------
+    (N, len(names)) float array (NaN/inf are returned as such; see :func:`check_finite`).
+    """
+    cols = list(range(len(names))) if usecols is None else list(usecols)
+    exact = ncols if ncols is not None else (len(names) if usecols is None else None)
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            arr = np.loadtxt(rows.lines, delimiter=delimiter, dtype=float, comments=None,
+                             ndmin=2, usecols=cols if usecols is not None else None,
+                             quotechar=None)
+        ok = arr.shape == (len(rows.lines), len(cols))
+        if ok and exact is not None and usecols is not None:
+            # loadtxt does not check the total field count with usecols
+            n = np.fromiter((len(s.split(delimiter)) for s in rows.lines), np.int64,
+                            len(rows.lines))
+            ok = bool(np.all(n == exact))
+        if ok:
+            return arr
+    except (ValueError, IndexError, OverflowError, TypeError):
+        pass
+    return _diagnose_numeric(rows, names, cols, delimiter, exact)
+
+
+def _diagnose_numeric(rows: TextRows, names, cols, delimiter, exact) -> np.ndarray:
+    need = max(cols) + 1 if cols else 0
+    out = np.empty((len(rows.lines), len(cols)))
+    expected_fields = f"{exact} fields" if exact is not None else f"at least {need} fields"
+    for i, line in enumerate(rows.lines):
+        f = line.split(delimiter)
+        if (exact is not None and len(f) != exact) or len(f) < need:
+            raise InputFormatError("wrong number of fields", file=rows.file, row=int(rows.line_no[i]),
+                                   expected=expected_fields, found=f"{len(f)} fields")
+        for j, c in enumerate(cols):
+            try:
+                out[i, j] = _strict_float(f[c])
+            except ValueError:
+                raise InputFormatError("non-numeric value", file=rows.file,
+                                       row=int(rows.line_no[i]), column=names[j],
+                                       expected="a number", found=repr(f[c].strip()[:40])) from None
+    return out
+
+
+# --------------------------------------------------------------------------------------------
+# values
+# --------------------------------------------------------------------------------------------
+
+
+def check_finite(values: np.ndarray, names: Sequence[str], line_no: np.ndarray, file) -> None:
+    """Raise InvalidValueError at the first NaN or inf (row-major order)."""
+    values = np.asarray(values, float)
+    if values.ndim == 1:
+        values = values[:, None]
+    ok = np.isfinite(values)
+    if ok.all():
+        return
+    i, j = np.argwhere(~ok)[0]
+    raise InvalidValueError("non-finite value", file=file, row=int(line_no[i]), column=names[j],
+                            expected="a finite number", found=str(values[i, j]))
+
+
+def check_range(values: np.ndarray, lo: float, hi: float, column: str, line_no: np.ndarray, file,
+                *, unit: str = "") -> None:
+    """Raise InvalidValueError at the first value outside ``[lo, hi]``."""
+    values = np.asarray(values, float)
+    bad = (values < lo) | (values > hi)
+    if not bad.any():
+        return
+    i = int(np.flatnonzero(bad)[0])
+    raise InvalidValueError("value out of range", file=file, row=int(line_no[i]), column=column,
+                            expected=f"{lo:g} <= value <= {hi:g}{(' ' + unit) if unit else ''}",
+                            found=f"{values[i]:g}")
+
+
+def check_allowed(values: np.ndarray, allowed: Iterable[float], column: str, line_no: np.ndarray,
+                  file) -> None:
+    """Raise InvalidValueError at the first value not in ``allowed``."""
+    allowed = np.asarray(sorted(allowed), float)
+    bad = ~np.isin(np.asarray(values, float), allowed)
+    if not bad.any():
+        return
+    i = int(np.flatnonzero(bad)[0])
+    raise InvalidValueError("invalid value", file=file, row=int(line_no[i]), column=column,
+                            expected="one of " + ", ".join(f"{a:g}" for a in allowed),
+                            found=f"{float(values[i]):g}")
+
+
+def require_rows(n: int, minimum: int, file, row: int | None = None, what: str = "samples") -> None:
+    """Raise InputFormatError if fewer than ``minimum`` rows remain."""
+    if n < minimum:
+        raise InputFormatError(f"too few {what}", file=file, row=row,
+                               expected=f"at least {minimum}", found=str(n))
+
+
+# --------------------------------------------------------------------------------------------
+# time
+# --------------------------------------------------------------------------------------------
+
+DUPLICATE_POLICIES = ("drop", "error")
+
+
+def check_time_order(t: np.ndarray, line_no: np.ndarray, file, *, column: str = "time",
+                     duplicates: str = "drop") -> tuple[np.ndarray, list[dict]]:
+    """Time must increase strictly; repeated stamps are dropped (policy) or an error.
+
+    Returns
+    -------
+    keep : (N,) bool array
+        False for dropped duplicates.
+    dropped : list of dict
+        ``{"row", "time"}`` of every dropped sample (also announced by one warning).
+    """
+    if duplicates not in DUPLICATE_POLICIES:
+        raise ConfigError("unknown duplicate policy", column="duplicates",
+                          expected=" or ".join(DUPLICATE_POLICIES), found=repr(duplicates))
+    t = np.asarray(t, float)
+    d = np.diff(t)
+    back = np.flatnonzero(d < 0)
+    if back.size:
+        k = int(back[0]) + 1
+        raise TimeOrderError("time goes backwards", file=file, row=int(line_no[k]), column=column,
+                             expected=f"a time after {t[k - 1]!r} (row {int(line_no[k - 1])})",
+                             found=repr(float(t[k])))
+    keep = np.ones(t.size, bool)
+    dup = np.flatnonzero(d == 0) + 1
+    if not dup.size:
+        return keep, []
+    k = int(dup[0])
+    if duplicates == "error":
+        raise TimeOrderError("duplicated time stamp", file=file, row=int(line_no[k]), column=column,
+                             expected=f"a time after {t[k - 1]!r} (row {int(line_no[k - 1])})",
+                             found=repr(float(t[k])))
+    keep[dup] = False
+    dropped = [{"row": int(line_no[i]), "time": float(t[i])} for i in dup]
+    warn(f"{dup.size} sample(s) with a duplicated time stamp dropped (first kept)", file=file,
+         row=int(line_no[k]), column=column, found=repr(float(t[k])))
+    return keep, dropped
+
+
+def nominal_interval(t: np.ndarray) -> float:
+    """Median sample interval [s]."""
+    return float(np.median(np.diff(np.asarray(t, float))))
+
+
+def check_rate(t: np.ndarray, line_no: np.ndarray, file, rate_hz: float | None, *,
+               column: str = "time", tolerance: float = 0.05) -> float:
+    """Compare the measured rate (1 / median interval) with the declared ``rate_hz``.
+
+    Returns the nominal interval [s]: ``1 / rate_hz`` when declared, else the median interval.
+    Raises RateMismatchError when they differ by more than ``tolerance`` (relative).
+    """
+    dt = nominal_interval(t)
+    if rate_hz is None:
+        return dt
+    try:
+        rate_ok = float(rate_hz) > 0 and np.isfinite(float(rate_hz))
+    except (TypeError, ValueError):
+        rate_ok = False
+    if not rate_ok:
+        raise ConfigError("invalid declared sample rate", column="rate_hz",
+                          expected="a positive number of Hz", found=repr(rate_hz))
+    rate_hz = float(rate_hz)
+    measured = 1.0 / dt
+    if abs(measured / rate_hz - 1.0) > tolerance:
+        raise RateMismatchError("sample rate does not match the declared rate", file=file,
+                                row=int(line_no[1]), column=column,
+                                expected=f"{rate_hz:g} Hz (+-{tolerance:.0%})",
+                                found=f"{measured:.6g} Hz (median interval {dt:.6g} s)")
+    return 1.0 / rate_hz
+
+
+@dataclass(frozen=True)
+class GapPolicy:
+    """What to do with IMU gaps.
+
+    Attributes
+    ----------
+    factor : float
+        An interval longer than ``factor`` nominal intervals is a gap (1.5).
+    max_bridge : float
+        Gaps up to this duration [s] are bridged with a warning (1.0 s).
+    long : {"error", "split", "bridge"}
+        Longer gaps stop with DataGapError (default), split the data into segments
+        (``attrs["segments"]``), or are bridged too.
+    """
+
+    factor: float = 1.5
+    max_bridge: float = 1.0
+    long: str = "error"
+
+    def __post_init__(self):
+        if self.long not in ("error", "split", "bridge"):
+            raise ConfigError("unknown gap policy", column="gap_policy.long",
+                              expected="'error', 'split' or 'bridge'", found=repr(self.long))
+        for name in ("factor", "max_bridge"):
+            v = getattr(self, name)
+            if not isinstance(v, (int, float)) or not np.isfinite(v) or v < 0:
+                raise ConfigError("invalid gap policy value", column=f"gap_policy.{name}",
+                                  expected="a non-negative number", found=repr(v))
+        if self.factor <= 1.0:
+            raise ConfigError("invalid gap policy value", column="gap_policy.factor",
+                              expected="a number > 1", found=repr(self.factor))
+
+
+def find_gaps(t: np.ndarray, line_no: np.ndarray, nominal_dt: float, factor: float = 1.5
+              ) -> list[dict]:
+    """Intervals longer than ``factor * nominal_dt``.
+
+    Returns ``[{"row", "start", "end", "duration", "missing"}]`` where ``row`` is the line of the
+    sample that ends the gap and ``missing`` the estimated number of lost samples.
+    """
+    t = np.asarray(t, float)
+    d = np.diff(t)
+    idx = np.flatnonzero(d > factor * nominal_dt)
+    return [{"row": int(line_no[k + 1]), "start": float(t[k]), "end": float(t[k + 1]),
+             "duration": float(d[k]), "missing": int(max(round(d[k] / nominal_dt) - 1, 1))}
+            for k in idx]
+
+
+def apply_gap_policy(gaps: list[dict], policy: GapPolicy, file, t0: float, t1: float, *,
+                     column: str = "time") -> tuple[list[dict], list[tuple[float, float]]]:
+    """Apply ``policy`` to the gaps found by :func:`find_gaps`.
+
+    Returns the gap records (with ``action``) and the contiguous segments ``[(start, end)]``
+    (one segment unless long gaps split the data). Raises DataGapError for a long gap under
+    ``long="error"``; warns once for the bridged gaps.
+    """
+    records = []
+    segments = []
+    seg_start = t0
+    for g in gaps:
+        g = dict(g)
+        if g["duration"] <= policy.max_bridge or policy.long == "bridge":
+            g["action"] = "bridged"
+        elif policy.long == "error":
+            raise DataGapError(
+                "data gap longer than the gap policy bridges", file=file, row=g["row"],
+                column=column, expected=f"gaps <= {policy.max_bridge:g} s (gap_policy.max_bridge)",
+                found=f"{g['duration']:.6g} s from {g['start']!r} to {g['end']!r}")
+        else:
+            g["action"] = "split"
+            segments.append((seg_start, g["start"]))
+            seg_start = g["end"]
+        records.append(g)
+    segments.append((seg_start, t1))
+    bridged = [g for g in records if g["action"] == "bridged"]
+    if bridged:
+        worst = max(bridged, key=lambda g: g["duration"])
+        warn(f"{len(bridged)} gap(s) bridged (longest {worst['duration']:.6g} s, "
+             f"about {sum(g['missing'] for g in bridged)} sample(s) missing)", file=file,
+             row=bridged[0]["row"], column=column)
+    split = [g for g in records if g["action"] == "split"]
+    if split:
+        warn(f"data split into {len(segments)} segments at {len(split)} long gap(s)", file=file,
+             row=split[0]["row"], column=column)
+    return records, segments
+
+
+def split_segments(df: pd.DataFrame) -> list[pd.DataFrame]:
+    """The contiguous parts of a table read with ``GapPolicy(long="split")``."""
+    if not len(df):
+        return []
+    segs = df.attrs.get("segments") or [(df.index[0], df.index[-1])]
+    t = np.asarray(df.index, float)
+    return [df.iloc[np.searchsorted(t, a, "left"):np.searchsorted(t, b, "right")] for a, b in segs]
+
+
+def check_span(t: np.ndarray, line_no: np.ndarray, file, t0: float, t1: float, *,
+               column: str = "time", policy: str = "trim", tolerance: float = 0.0,
+               what: str = "IMU") -> tuple[np.ndarray, list[dict]]:
+    """Epochs must lie inside ``[t0 - tolerance, t1 + tolerance]``.
+
+    ``policy="trim"``: epochs outside are dropped with a warning (returned mask and records);
+    an error only if no epoch is inside. ``policy="error"``: any epoch outside is an error.
+    Raises TimeOrderError at the first epoch outside.
+    """
+    if policy not in ("trim", "error"):
+        raise ConfigError("unknown span policy", column="span_policy",
+                          expected="'trim' or 'error'", found=repr(policy))
+    t = np.asarray(t, float)
+    outside = (t < t0 - tolerance) | (t > t1 + tolerance)
+    if not outside.any():
+        return np.ones(t.size, bool), []
+    k = int(np.flatnonzero(outside)[0])
+    if policy == "error" or outside.all():
+        msg = f"epoch outside the {what} time span"
+        if outside.all():
+            msg = f"no epoch inside the {what} time span (different time bases?)"
+        raise TimeOrderError(msg, file=file, row=int(line_no[k]), column=column,
+                             expected=f"{t0!r} <= time <= {t1!r}", found=repr(float(t[k])))
+    records = [{"row": int(line_no[i]), "time": float(t[i])} for i in np.flatnonzero(outside)]
+    warn(f"{len(records)} epoch(s) outside the {what} time span dropped", file=file,
+         row=records[0]["row"], column=column, expected=f"{t0!r} <= time <= {t1!r}",
+         found=repr(records[0]["time"]))
+    return ~outside, records
+
+
+def source_rows(df: pd.DataFrame) -> np.ndarray | None:
+    """Editor line numbers of the rows of a table as read (None if the table was reshaped)."""
+    rows = df.attrs.get("source_rows")
+    if rows is None or len(rows) != len(df):
+        return None
+    return np.asarray(rows)
+
+
+def check_gnss_in_imu_span(gnss: pd.DataFrame, imu: pd.DataFrame, *, policy: str = "trim",
+                           tolerance: float = 0.0) -> pd.DataFrame:
+    """GNSS epochs outside the IMU time span: trimmed with a warning, or an error.
+
+    The error and the warning name the GNSS file and line (``attrs["source"]``,
+    ``attrs["source_rows"]``). The trimmed table records the dropped epochs in
+    ``attrs["outside_imu_span"]``.
+    """
+    tg = np.asarray(gnss.index, float)
+    ti = np.asarray(imu.index, float)
+    require_rows(ti.size, 1, imu.attrs.get("source"), what="IMU samples")
+    rows = source_rows(gnss)
+    if rows is None:
+        rows = np.arange(tg.size) + 1
+    keep, records = check_span(tg, rows, gnss.attrs.get("source"), float(ti[0]), float(ti[-1]),
+                               column=gnss.attrs.get("time_column", "time"), policy=policy,
+                               tolerance=tolerance)
+    if not records:
+        return gnss
+    out = gnss.loc[keep].copy()
+    out.attrs = dict(gnss.attrs)
+    if "source_rows" in out.attrs and rows is not None:
+        out.attrs["source_rows"] = rows[keep]
+    out.attrs["outside_imu_span"] = records
+    return out
+
+
+# --------------------------------------------------------------------------------------------
+# IMU unit plausibility
+# --------------------------------------------------------------------------------------------
+
+#: still-sample detector of the gyro unit check
+STILL_WINDOW = 11
+STILL_STD = 0.2  # [m/s^2]
+STILL_MIN_SAMPLES = 20
+MAX_STILL_GYRO = 0.5  # [rad/s]
+MAX_GYRO = 100.0  # [rad/s]
+
+
+def _rolling_std(x: np.ndarray, w: int) -> np.ndarray:
+    """Centred rolling standard deviation (NaN near the ends), vectorised."""
+    n = x.size
+    out = np.full(n, np.nan)
+    if n < w:
+        return out
+    x = x - np.median(x)
+    c1 = np.concatenate([[0.0], np.cumsum(x)])
+    c2 = np.concatenate([[0.0], np.cumsum(x * x)])
+    m = (c1[w:] - c1[:-w]) / w
+    v = np.maximum((c2[w:] - c2[:-w]) / w - m * m, 0.0)
+    out[w // 2: w // 2 + v.size] = np.sqrt(v)
+    return out
+
+
+def check_imu_units(gyro: np.ndarray, accel: np.ndarray, line_no: np.ndarray, file, *,
+                    gyro_names: Sequence[str], accel_names: Sequence[str], gyro_unit: str,
+                    accel_unit: str) -> None:
+    """Reject magnitudes that do not fit the declared units (see the module docstring).
+
+    ``gyro`` [rad/s] and ``accel`` [m/s^2] are rates after the declared unit conversion (for
+    increment data: increments divided by the sample interval), in the sensor axes so that the
+    columns match the file's.
+    """
+    fn = np.linalg.norm(accel, axis=1)
+    med = float(np.median(fn))
+    lo, hi = 0.5 * G0, 2.0 * G0
+    if not lo <= med <= hi:
+        if lo <= med * G0 <= hi:
+            hint = "; the values look like g"
+        elif lo <= med / G0 <= hi:
+            hint = "; the values look like m/s^2 declared as g"
+        elif med < lo:
+            hint = "; the values look like increments or a smaller unit"
+        else:
+            hint = ""
+        bad = np.flatnonzero((fn < lo) | (fn > hi))
+        i = int(bad[0]) if bad.size else 0
+        j = int(np.argmax(np.abs(accel[i])))
+        raise UnitError(f"accelerometer magnitude implausible for the declared unit "
+                        f"{accel_unit!r}{hint}", file=file, row=int(line_no[i]),
+                        column=accel_names[j],
+                        expected="a median specific force of 0.5-2 g (4.9-19.6 m/s^2)",
+                        found=f"{med:.4g} m/s^2 after conversion from {accel_unit!r}")
+    wn = np.linalg.norm(gyro, axis=1)
+    hint = "; the values look like deg/s declared as rad/s" if gyro_unit == "rad/s" else ""
+    over = np.flatnonzero(np.abs(gyro).max(axis=1) > MAX_GYRO)
+    if over.size:
+        i = int(over[0])
+        j = int(np.argmax(np.abs(gyro[i])))
+        raise UnitError(f"angular rate implausible for the declared unit {gyro_unit!r}{hint}",
+                        file=file, row=int(line_no[i]), column=gyro_names[j],
+                        expected=f"|rate| <= {MAX_GYRO:g} rad/s",
+                        found=f"{gyro[i, j]:.4g} rad/s after conversion from {gyro_unit!r}")
+    still = (_rolling_std(fn, STILL_WINDOW) < STILL_STD) & (np.abs(fn - G0) < 0.1 * G0)
+    if still.sum() >= STILL_MIN_SAMPLES:
+        med_w = float(np.median(wn[still]))
+        if med_w > MAX_STILL_GYRO:
+            i = int(np.flatnonzero(still & (wn > MAX_STILL_GYRO))[0])
+            j = int(np.argmax(np.abs(gyro[i])))
+            raise UnitError(
+                f"angular rates too large while the accelerometers are still{hint}", file=file,
+                row=int(line_no[i]), column=gyro_names[j],
+                expected=f"a median |rate| below {MAX_STILL_GYRO:g} rad/s "
+                         f"({np.degrees(MAX_STILL_GYRO):.1f} deg/s) on still samples",
+                found=f"{med_w:.4g} rad/s after conversion from {gyro_unit!r}")
+
+
+# --------------------------------------------------------------------------------------------
+# outputs
+# --------------------------------------------------------------------------------------------
+
+
+def ensure_not_input(path: str | os.PathLike, inputs: Iterable[str | os.PathLike | None]) -> Path:
+    """Refuse to write ``path`` if it is one of ``inputs`` (same resolved path or same file).
+
+    Returns ``Path(path)``. Raises ConfigError naming the clashing input.
+    """
+    p = Path(path)
+    rp = p.resolve()
+    for q in inputs:
+        if q is None:
+            continue
+        q = Path(q)
+        same = rp == q.resolve()
+        if not same and p.exists() and q.exists():
+            try:
+                same = os.path.samefile(p, q)
+            except OSError:
+                same = False
+        if same:
+            raise ConfigError("refusing to overwrite an input file", file=p,
+                              expected="an output path that is not an input",
+                              found=f"the input {str(q)!r}")
+    return p
+
+
+def finish_attrs(df: pd.DataFrame, *, file, fmt: str, time_base: str, line_no: np.ndarray,
+                 time_column: str = "time", **extra) -> pd.DataFrame:
+    """Set the attrs every reader provides: source, format, time base, line numbers, records."""
+    df.attrs.update({"source": str(file), "format": fmt, "time_base": time_base,
+                     "time_column": time_column, "source_rows": np.asarray(line_no, np.int64)})
+    df.attrs.update(extra)
+    return df
