@@ -1,0 +1,124 @@
+"""Evaluation of a trajectory against a reference.
+
+Errors are computed at the reference epochs: the solution is interpolated linearly in ECEF
+(bracketing samples at most ``max_gap`` apart) and the difference is expressed in the local
+ENU frame of the reference point. A lever arm moves the solution to the point the reference
+measures (``r_point = r_imu + C_b^l l^b``). Outage metrics follow the drive benchmark protocol
+(shared/eval/README.md): per outage the horizontal error at its last reference epoch, the max
+and the RMS inside it, the vertical error at its end; outside the outages the horizontal RMS
+after a settling time, skipping a guard interval after each outage end.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pandas as pd
+
+from .attitude import euler_to_dcm
+from .earth import ecef_to_enu_matrix, enu_displacement_to_geodetic, geodetic_to_ecef
+from .outages import in_windows, window_index
+
+
+def move_point(traj: pd.DataFrame, lever_arm) -> pd.DataFrame:
+    """Trajectory of the point at ``lever_arm`` (body RFU, metres) from the IMU trajectory."""
+    la = np.asarray(lever_arm, float)
+    if not np.any(la):
+        return traj
+    C = euler_to_dcm(traj["roll"].to_numpy(), traj["pitch"].to_numpy(), traj["heading"].to_numpy())
+    d = C @ la
+    lat, h = traj["lat"].to_numpy(), traj["height"].to_numpy()
+    dlat, dlon, dh = enu_displacement_to_geodetic(lat, h, d[:, 0], d[:, 1], d[:, 2])
+    out = traj.copy()
+    out["lat"] = lat + dlat
+    out["lon"] = traj["lon"].to_numpy() + dlon
+    out["height"] = h + dh
+    return out
+
+
+def position_errors(solution: pd.DataFrame, reference: pd.DataFrame, *,
+                    max_gap: float = 0.5) -> pd.DataFrame:
+    """ENU position error (solution - reference) [m] at the reference epochs.
+
+    Returns a DataFrame indexed by the reference times with ``east north up horizontal``;
+    epochs not covered by the solution (outside its span or across a gap) are NaN.
+    """
+    ts = solution.index.to_numpy(float)
+    tr = reference.index.to_numpy(float)
+    xs = np.column_stack(geodetic_to_ecef(solution["lat"].to_numpy(), solution["lon"].to_numpy(),
+                                          solution["height"].to_numpy()))
+    xr = np.column_stack(geodetic_to_ecef(reference["lat"].to_numpy(),
+                                          reference["lon"].to_numpy(),
+                                          reference["height"].to_numpy()))
+    j = np.searchsorted(ts, tr, side="right")
+    ok = (j > 0) & (j < ts.size)
+    jj = np.clip(j, 1, ts.size - 1)
+    t0, t1 = ts[jj - 1], ts[jj]
+    ok &= (t1 - t0) <= max_gap
+    exact = np.isclose(ts[np.clip(j - 1, 0, ts.size - 1)], tr, atol=1e-4, rtol=0)
+    w = np.where(t1 > t0, (tr - t0) / np.where(t1 > t0, t1 - t0, 1.0), 0.0)
+    xi = xs[jj - 1] + w[:, None] * (xs[jj] - xs[jj - 1])
+    xi[~ok & exact] = xs[np.clip(j - 1, 0, ts.size - 1)][~ok & exact]
+    ok |= exact
+    d = xi - xr
+    lat, lon = reference["lat"].to_numpy(), reference["lon"].to_numpy()
+    enu = np.empty_like(d)
+    for k in range(len(d)):  # per reference epoch (a few thousand), not per IMU sample
+        enu[k] = ecef_to_enu_matrix(lat[k], lon[k]) @ d[k]
+    enu[~ok] = np.nan
+    out = pd.DataFrame(enu, index=reference.index, columns=["east", "north", "up"])
+    out["horizontal"] = np.hypot(out["east"], out["north"])
+    return out
+
+
+def outage_metrics(errors: pd.DataFrame, windows, *, t_first: float | None = None,
+                   settle_time: float = 10.0, guard_time: float = 1.0) -> tuple[pd.DataFrame, dict]:
+    """Per-outage error table and a summary dict (drive benchmark protocol)."""
+    t = errors.index.to_numpy(float)
+    hz = errors["horizontal"].to_numpy()
+    up = errors["up"].to_numpy()
+    k_of = window_index(t, windows)
+    rows = []
+    for k, (a, b) in enumerate(windows):
+        m = k_of == k
+        valid = m & np.isfinite(hz)
+        if not np.any(valid):
+            rows.append({"outage": k, "start": a, "end": b, "n_epochs": 0,
+                         "end_h_err_m": np.nan, "max_h_err_m": np.nan, "rms_h_err_m": np.nan,
+                         "end_v_err_m": np.nan, "complete": False})
+            continue
+        last = np.nonzero(valid)[0][-1]
+        rows.append({"outage": k, "start": a, "end": b, "n_epochs": int(valid.sum()),
+                     "end_h_err_m": float(hz[last]), "max_h_err_m": float(np.max(hz[valid])),
+                     "rms_h_err_m": float(np.sqrt(np.mean(hz[valid] ** 2))),
+                     "end_v_err_m": float(up[last]),
+                     "complete": bool(valid.sum() == m.sum())})
+    table = pd.DataFrame(rows)
+    t0 = t[0] if t_first is None else t_first
+    outside = ~in_windows(t, windows) & (t >= t0 + settle_time) & np.isfinite(hz)
+    guarded = outside & ~in_windows(t, [(b, b + guard_time) for _, b in windows])
+    summary = {
+        "n_outages": len(windows),
+        "non_outage_rms_h_m": _rms(hz[guarded]),
+        "non_outage_rms_h_no_guard_m": _rms(hz[outside]),
+        "non_outage_rms_v_m": _rms(up[guarded]),
+    }
+    for col in ("end_h_err_m", "max_h_err_m", "rms_h_err_m"):
+        v = table[col].to_numpy(float) if len(table) else np.array([])
+        v = v[np.isfinite(v)]
+        summary[f"{col}_mean"] = float(np.mean(v)) if v.size else float("nan")
+        summary[f"{col}_median"] = float(np.median(v)) if v.size else float("nan")
+        summary[f"{col}_max"] = float(np.max(v)) if v.size else float("nan")
+    return table, summary
+
+
+def _rms(x) -> float:
+    x = np.asarray(x, float)
+    return float(np.sqrt(np.mean(x**2))) if x.size else float("nan")
+
+
+def error_summary(errors: pd.DataFrame) -> dict:
+    """RMS and max of the horizontal and vertical errors."""
+    hz = errors["horizontal"].dropna().to_numpy()
+    up = errors["up"].dropna().to_numpy()
+    return {"rms_h_m": _rms(hz), "max_h_m": float(hz.max()) if hz.size else float("nan"),
+            "rms_v_m": _rms(up), "n_epochs": int(hz.size)}

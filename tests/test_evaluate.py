@@ -1,0 +1,69 @@
+"""Outage schedules and evaluation against a reference."""
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from insgnss.earth import enu_to_geodetic
+from insgnss.evaluate import move_point, outage_metrics, position_errors
+from insgnss.outages import in_windows, periodic_windows, window_index
+
+LAT0, LON0, H0 = np.radians(40.1), np.radians(-105.15), 1600.0
+
+
+def test_drive_schedule_matches_benchmark():
+    t0 = 1436038458.499
+    w = periodic_windows(t0, t0 + 549.0, 40.0, 15.0, 30.0, 30.0)
+    assert len(w) == 11
+    assert w[0] == pytest.approx((1436038498.499, 1436038513.499), abs=1e-6)
+    assert all(b - a == pytest.approx(15.0) for a, b in w)
+    t = t0 + np.arange(0, 549.0, 0.25)
+    assert in_windows(t, w).sum() == 660  # 11 x 60 epochs withheld
+    idx = window_index(t, w)
+    assert idx.max() == 10 and (idx == 0).sum() == 60
+    # boundaries: start inside, end outside
+    assert in_windows([w[0][0], w[0][1]], w).tolist() == [True, False]
+
+
+def _track(t, e, n, u):
+    lat, lon, h = enu_to_geodetic(e, n, u, LAT0, LON0, H0)
+    return pd.DataFrame({"lat": lat, "lon": lon, "height": h, "roll": 0.0 * t, "pitch": 0.0 * t,
+                         "heading": 0.0 * t}, index=pd.Index(t, name="time"))
+
+
+def test_position_errors_interpolates_and_measures():
+    t_ref = np.arange(0, 100.0, 0.25)
+    ref = _track(t_ref, 10 * t_ref, 0 * t_ref, 0 * t_ref)
+    t_sol = np.arange(0, 100.0, 0.01)
+    # (errors are in the local ENU of each reference point; 1 km from the origin the frames
+    # differ by 0.16 mrad, hence the 1 mm tolerance)
+    sol = _track(t_sol, 10 * t_sol + 0.3, 0 * t_sol - 0.4, 0 * t_sol + 0.1)
+    err = position_errors(sol, ref)
+    assert err["east"].dropna().to_numpy() == pytest.approx(0.3, abs=1e-3)
+    assert err["north"].dropna().to_numpy() == pytest.approx(-0.4, abs=1e-3)
+    assert err["horizontal"].dropna().to_numpy() == pytest.approx(0.5, abs=1e-3)
+    # a gap in the solution leaves NaN
+    sol_gap = sol[(sol.index < 40) | (sol.index > 41)]
+    err2 = position_errors(sol_gap, ref)
+    assert err2.loc[40.25:40.75, "east"].isna().all()
+
+
+def test_lever_arm_moves_point():
+    t = np.arange(3.0)
+    tr = _track(t, 0 * t, 0 * t, 0 * t)
+    tr["heading"] = np.pi / 2  # forward = east
+    moved = move_point(tr, [0.0, 2.0, 0.0])
+    err = position_errors(moved, tr, max_gap=2.0)
+    assert err["east"].to_numpy() == pytest.approx(2.0, abs=1e-6)
+
+
+def test_outage_metrics():
+    t = np.arange(0, 100.0, 0.25)
+    hz = np.where((t >= 40) & (t < 55), (t - 40) * 0.1, 0.02)
+    err = pd.DataFrame({"east": hz, "north": 0 * t, "up": 0 * t + 0.5, "horizontal": hz},
+                       index=t)
+    table, summary = outage_metrics(err, [(40.0, 55.0)], settle_time=10.0)
+    assert table["end_h_err_m"].iloc[0] == pytest.approx(14.75 * 0.1)
+    assert table["max_h_err_m"].iloc[0] == pytest.approx(14.75 * 0.1)
+    assert summary["non_outage_rms_h_m"] == pytest.approx(0.02)
+    assert summary["n_outages"] == 1 and table["complete"].iloc[0]
