@@ -47,13 +47,16 @@ _LEAP_VALUES = np.array([v for _, v in LEAP_SECONDS], dtype=float)
 
 def gps_seconds_from_datetime64(t: np.ndarray) -> np.ndarray:
     """GPS seconds from GPST calendar times (``datetime64``, any unit)."""
-    t = np.asarray(t, dtype="datetime64[ns]")
-    return (t - GPS_EPOCH).astype(np.int64) * 1e-9
+    ns = (np.asarray(t, dtype="datetime64[ns]") - GPS_EPOCH).astype(np.int64)
+    whole, frac = np.divmod(ns, 1_000_000_000)
+    return whole.astype(float) + frac * 1e-9
 
 
 def datetime64_from_gps_seconds(t) -> np.ndarray:
     """GPST calendar times (``datetime64[ns]``) from GPS seconds."""
-    ns = np.round(np.asarray(t, float) * 1e9).astype(np.int64)
+    t = np.asarray(t, float)
+    whole = np.floor(t)
+    ns = whole.astype(np.int64) * 1_000_000_000 + np.round((t - whole) * 1e9).astype(np.int64)
     return GPS_EPOCH + ns.astype("timedelta64[ns]")
 
 
