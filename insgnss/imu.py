@@ -197,6 +197,12 @@ class ImuErrorModel:
         Scale-factor error (1-sigma, fraction).
     gyro_misalignment, accel_misalignment : float
         Non-orthogonality (1-sigma) [rad].
+    gyro_quantization, accel_quantization : float
+        Output resolution of the increments [rad], [m/s] (0: none).
+    gyro_range, accel_range : float
+        Measurement range (saturation) [rad/s], [m/s^2] (0: unlimited).
+    gyro_g_sensitivity : float
+        g-sensitivity of the gyros (1-sigma of each element of the 3x3 matrix) [rad/s per m/s^2].
     """
 
     gyro_bias: float = 0.0
@@ -212,6 +218,11 @@ class ImuErrorModel:
     accel_scale: float = 0.0
     gyro_misalignment: float = 0.0
     accel_misalignment: float = 0.0
+    gyro_quantization: float = 0.0
+    accel_quantization: float = 0.0
+    gyro_range: float = 0.0
+    accel_range: float = 0.0
+    gyro_g_sensitivity: float = 0.0
     name: str = "custom"
     source: str = field(default="", compare=False)
 
@@ -232,10 +243,16 @@ class ImuErrorModel:
         accel_scale_ppm: float = 0.0,
         gyro_misalignment_mrad: float = 0.0,
         accel_misalignment_mrad: float = 0.0,
+        gyro_quantization_urad: float = 0.0,
+        accel_quantization_mm_s: float = 0.0,
+        gyro_range_deg_s: float = 0.0,
+        accel_range_g: float = 0.0,
+        gyro_g_sensitivity_deg_h_g: float = 0.0,
         name: str = "custom",
         source: str = "",
     ) -> ImuErrorModel:
-        """Build a model from datasheet units (deg/h, mg, ug, deg/sqrt(h), m/s/sqrt(h), ppm)."""
+        """Build a model from datasheet units (deg/h, mg, ug, deg/sqrt(h), m/s/sqrt(h), ppm,
+        mrad, urad, mm/s, deg/s, g, deg/h/g)."""
         return cls(
             gyro_bias=gyro_bias_deg_h * DEG_PER_HOUR,
             accel_bias=accel_bias_mg * MG,
@@ -250,6 +267,11 @@ class ImuErrorModel:
             accel_scale=accel_scale_ppm * PPM,
             gyro_misalignment=gyro_misalignment_mrad * 1e-3,
             accel_misalignment=accel_misalignment_mrad * 1e-3,
+            gyro_quantization=gyro_quantization_urad * 1e-6,
+            accel_quantization=accel_quantization_mm_s * 1e-3,
+            gyro_range=gyro_range_deg_s * DEG,
+            accel_range=accel_range_g * G0,
+            gyro_g_sensitivity=gyro_g_sensitivity_deg_h_g * DEG_PER_HOUR / G0,
             name=name,
             source=source,
         )
