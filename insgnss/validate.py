@@ -325,7 +325,7 @@ def check_time_order(t: np.ndarray, line_no: np.ndarray, file, *, column: str = 
     if back.size:
         k = int(back[0]) + 1
         raise TimeOrderError("time goes backwards", file=file, row=int(line_no[k]), column=column,
-                             expected=f"a time after {t[k - 1]!r} (row {int(line_no[k - 1])})",
+                             expected=f"a time after {float(t[k - 1])!r} (row {int(line_no[k - 1])})",
                              found=repr(float(t[k])))
     keep = np.ones(t.size, bool)
     dup = np.flatnonzero(d == 0) + 1
@@ -334,7 +334,7 @@ def check_time_order(t: np.ndarray, line_no: np.ndarray, file, *, column: str = 
     k = int(dup[0])
     if duplicates == "error":
         raise TimeOrderError("duplicated time stamp", file=file, row=int(line_no[k]), column=column,
-                             expected=f"a time after {t[k - 1]!r} (row {int(line_no[k - 1])})",
+                             expected=f"a time after {float(t[k - 1])!r} (row {int(line_no[k - 1])})",
                              found=repr(float(t[k])))
     keep[dup] = False
     dropped = [{"row": int(line_no[i]), "time": float(t[i])} for i in dup]
@@ -484,6 +484,7 @@ def check_span(t: np.ndarray, line_no: np.ndarray, file, t0: float, t1: float, *
         raise ConfigError("unknown span policy", column="span_policy",
                           expected="'trim' or 'error'", found=repr(policy))
     t = np.asarray(t, float)
+    t0, t1 = float(t0), float(t1)
     outside = (t < t0 - tolerance) | (t > t1 + tolerance)
     if not outside.any():
         return np.ones(t.size, bool), []
