@@ -1,0 +1,74 @@
+"""Allan deviation of a static IMU log with ARW/VRW, bias instability and rate random walk.
+
+Reads a native insgnss IMU table (increments ``dtheta_* dv_*`` or rates ``gyro_* accel_*``),
+computes the overlapping Allan deviation of the six axes, prints the noise coefficients in
+datasheet units and writes ``<stem>_allan.png`` (curves with the fitted -1/2, 0 and +1/2 reference
+slopes), ``<stem>_allan.csv`` (the deviation per tau, SI) and ``<stem>_allan_coefficients.csv``.
+
+Example::
+
+    insgnss allan out/static/imu.csv -o out/static --start 0 --stop 3600
+"""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+NAME = "allan"
+HELP = "Allan deviation of a static IMU log: ARW/VRW, bias instability, RRW and a figure"
+
+
+def register(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("imu_file", metavar="IMU_FILE", help="native IMU table (CSV)")
+    parser.add_argument("-o", "--output", metavar="DIR", default=None,
+                        help="output folder (default: the folder of IMU_FILE)")
+    parser.add_argument("--start", type=float, default=None, help="first time to use [s]")
+    parser.add_argument("--stop", type=float, default=None, help="last time to use [s]")
+    parser.add_argument("--points-per-decade", type=int, default=10,
+                        help="tau values per decade (default 10)")
+    parser.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    from ..analysis.allan import allan_analysis, coefficients_table, plot_allan
+    from ..errors import InputFormatError, InvalidValueError
+    from ..imu import is_increment_table
+    from ..io.native import atomic_write, read_table
+
+    src = Path(args.imu_file)
+    imu = read_table(src)
+    try:
+        is_increment_table(imu)
+    except ValueError as exc:
+        raise InputFormatError(str(exc), file=src, row=1) from None
+    if args.start is not None:
+        imu = imu[imu.index >= args.start]
+    if args.stop is not None:
+        imu = imu[imu.index <= args.stop]
+    try:
+        result = allan_analysis(imu, points_per_decade=args.points_per_decade)
+    except ValueError as exc:
+        raise InvalidValueError(str(exc), file=src) from None
+    out = Path(args.output) if args.output else src.parent
+    out.mkdir(parents=True, exist_ok=True)
+    stem = src.stem
+    table = coefficients_table(result)
+    fig = plot_allan(result, title=f"{src.name}: {result.duration / 3600:.2f} h at "
+                                   f"{result.rate:g} Hz")
+    png = atomic_write(out / f"{stem}_allan.png", lambda p: fig.savefig(p, format="png", dpi=120))
+    adev_csv = atomic_write(out / f"{stem}_allan.csv",
+                            lambda p: result.adev.to_csv(p, float_format="%.9g"))
+    coef_csv = atomic_write(out / f"{stem}_allan_coefficients.csv",
+                            lambda p: table.to_csv(p, float_format="%.6g"))
+    print(f"{src}: {result.duration:.1f} s at {result.rate:g} Hz")
+    print(f"{'axis':8s} {'ARW/VRW':>22s} {'bias instab.':>18s} {'(min/0.664)':>12s} "
+          f"{'tau_min [s]':>11s} {'RRW':>24s}")
+    for ax, r in table.iterrows():
+        print(f"{ax:8s} {r['arw_vrw']:10.4g} {r['arw_vrw_unit']:>11s} "
+              f"{r['bias_instability']:10.4g} {r['bias_instability_unit']:>7s} "
+              f"{r['bias_instability_min']:12.4g} {r['tau_min']:11.4g} "
+              f"{r['rrw']:10.4g} {r['rrw_unit']:>13s}")
+    for p in (png, adev_csv, coef_csv):
+        print(f"  {p}")
+    return 0
