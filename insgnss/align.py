@@ -184,6 +184,8 @@ def coarse_align(
     declination: float = 0.0,
     gravity_model: str = "somigliana",
     check: bool = True,
+    max_accel_std: float | None = None,
+    max_rate_std: float | None = None,
 ) -> AlignmentResult:
     """Static coarse alignment over all samples of ``imu`` (select the window before calling).
 
@@ -205,12 +207,19 @@ def coarse_align(
         Mean magnetometer vector in body RFU for ``heading_source="magnetometer"``.
     check : bool
         Raise :class:`AlignmentError` if the window is not static.
+    max_accel_std : float, optional
+        Stillness limit on the specific-force variation [m/s^2] (default: from the noise of
+        ``model``; a parked car with the engine running needs ~0.5).
+    max_rate_std : float, optional
+        Stillness limit on the angular-rate variation [rad/s] (default 1 deg/s or 5x the white
+        gyro noise).
     """
     w_mean, f_mean, w, f, T = _static_means(imu)
     g = normal_gravity(lat, height, gravity_model)
     if check:
         dt = T / max(len(imu) - 1, 1)
-        check_static(f, w, g, model, dt, t0=float(imu.index[0]))
+        check_static(f, w, g, model, dt, t0=float(imu.index[0]), max_accel_std=max_accel_std,
+                     max_rate=max_rate_std)
     roll, pitch = level(f_mean)
     if heading_source is None:
         if heading is not None:

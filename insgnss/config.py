@@ -5,7 +5,7 @@ type is a :class:`~insgnss.errors.ConfigError` that names the file and the dotte
 (``inputs.imu.gyro_unit``). Paths are resolved relative to the job file. Degrees appear only
 in keys ending in ``_deg``; everything else is SI.
 
-A job file may also carry simulation tables (``scenario``, ``trajectory``, ``imu_errors``...)
+A job file may also carry simulation tables (``scenario``, ``trajectory``, ``imu``, ``gnss``...)
 when it is a scenario for :mod:`insgnss.simulate`; those are validated by the simulator and
 passed through here untouched (:data:`SIMULATION_TABLES`).
 """
@@ -47,6 +47,8 @@ SCHEMA: dict[str, Any] = {
             "accel_unit": _spec(str, "m/s^2"),
             "time_unit": _spec(str, "s"),
             "time_offset": _spec(_NUM, 0.0, "added to the IMU time [s]"),
+            "estimate_time_offset": _spec(bool, False, "estimate a further IMU-GNSS offset from "
+                                          "gyro yaw rate vs GNSS course rate (land vehicles)"),
             "axis_map": _spec(str, None, 'sensor -> body axis map, e.g. "y,x,-z"'),
             "mounting_deg": _spec(list, None, "sensor mounting roll, pitch, yaw [deg]"),
             "mounting_convention": _spec(str, "active", choices=["active", "passive"]),
@@ -83,22 +85,14 @@ SCHEMA: dict[str, Any] = {
             "std": _spec(_NUM, 0.02, "default point sigma [m]"),
         },
     },
-    "imu": {
-        "grade": _spec(str, "tactical", "navigation, tactical, consumer/mems"),
-        "gyro_bias_deg_h": _spec(_NUM, None),
-        "accel_bias_mg": _spec(_NUM, None),
-        "gyro_bias_instability_deg_h": _spec(_NUM, None),
-        "accel_bias_instability_ug": _spec(_NUM, None),
-        "bias_correlation_time_s": _spec(_NUM, None),
-        "gyro_arw_deg_sqrt_h": _spec(_NUM, None),
-        "accel_vrw_m_s_sqrt_h": _spec(_NUM, None),
-        "gyro_scale_ppm": _spec(_NUM, None),
-        "accel_scale_ppm": _spec(_NUM, None),
-    },
     "initialization": {
         "method": _spec(str, "static", "static, gnss_velocity or given",
                         choices=["static", "gnss_velocity", "given"]),
         "static_duration": _spec(_NUM, 30.0, "static window at the start [s]"),
+        "static_max_accel_std": _spec(_NUM, 0.5, "stillness limit of the static window "
+                                      "(specific-force variation, m/s^2; engine vibration)"),
+        "static_max_rate_std_deg": _spec(_NUM, 5.0, "stillness limit of the static window "
+                                         "(angular-rate variation, deg/s)"),
         "heading_deg": _spec(_NUM, None, "given heading (static with consumer IMU, or given)"),
         "roll_deg": _spec(_NUM, None),
         "pitch_deg": _spec(_NUM, None),
@@ -153,6 +147,22 @@ SCHEMA: dict[str, Any] = {
         "scale_factors": _spec(bool, False),
         "smoother": _spec(bool, True),
         "coning": _spec(bool, False),
+        "noise_from_static": _spec(bool, False, "raise ARW/VRW to the noise measured in the "
+                                   "static initialization window (vibration)"),
+        "imu_grade": _spec(str, None, "IMU error model for the filter: navigation, tactical, "
+                           "consumer/mems (default: the scenario's [imu] for simulated jobs, "
+                           "else tactical)"),
+        "imu_model": {
+            "gyro_bias_deg_h": _spec(_NUM, None, "overrides of the grade, datasheet units"),
+            "accel_bias_mg": _spec(_NUM, None),
+            "gyro_bias_instability_deg_h": _spec(_NUM, None),
+            "accel_bias_instability_ug": _spec(_NUM, None),
+            "bias_correlation_time_s": _spec(_NUM, None),
+            "gyro_arw_deg_sqrt_h": _spec(_NUM, None),
+            "accel_vrw_m_s_sqrt_h": _spec(_NUM, None),
+            "gyro_scale_ppm": _spec(_NUM, None),
+            "accel_scale_ppm": _spec(_NUM, None),
+        },
     },
     "evaluation": {
         "enabled": _spec(bool, True),
@@ -169,8 +179,9 @@ SCHEMA: dict[str, Any] = {
     },
 }
 
-#: top-level tables that belong to the simulator (validated by insgnss.simulate)
-SIMULATION_TABLES = ("scenario", "trajectory", "imu_errors", "gnss", "odometer", "magnetometer",
+#: top-level tables that belong to the simulator (validated by insgnss.simulate; the same names
+#: as insgnss.simulate.scenario.SIM_TABLES) and to Monte Carlo runs
+SIMULATION_TABLES = ("scenario", "trajectory", "imu", "gnss", "odometer", "magnetometer",
                      "montecarlo")
 
 

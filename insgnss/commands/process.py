@@ -1,0 +1,56 @@
+"""Run a TOML job end to end: read the inputs (or simulate a scenario), initialize, run the
+error-state filter and the RTS smoother with the job's aiding, evaluate against the reference,
+and write the forward and smoothed trajectories, innovation and rejection logs, a JSON summary
+and an HTML report (docs/jobs.md).
+
+Example:
+  insgnss process scenarios/drive_0708.toml -o out/drive
+"""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+NAME = "process"
+HELP = "run a job file end to end (filter, smoother, evaluation, report)"
+
+
+def register(p: argparse.ArgumentParser) -> None:
+    p.add_argument("job", type=Path, help="TOML job file")
+    p.add_argument("-o", "--output", type=Path, help="output folder (default: [outputs] dir)")
+    p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    p.add_argument("--no-report", action="store_true", help="do not write report.html")
+    p.add_argument("--seed", type=int, help="simulation seed (jobs that simulate a scenario)")
+    p.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    from ..config import load_job
+    from ..pipeline import run_job, write_outputs
+
+    job = load_job(args.job)
+    if args.no_report:
+        job.settings["outputs"]["report"] = False
+    res = run_job(job, progress=False if args.no_progress else None, seed=args.seed)
+    paths = write_outputs(res, args.output)
+    print_summary(res)
+    out = args.output or job.output_dir
+    print(f"wrote {len(paths)} files to {out}")
+    return 0 if res.filter.complete else 3
+
+
+def print_summary(res) -> None:
+    s = res.summary
+    if not s["complete"]:
+        print(f"INCOMPLETE: the filter stopped early: {s['error']}")
+    t = s["timing_s"]
+    print(f"{s['job']}: {s['imu_samples']:,} IMU samples, filter {t.get('total', 0):.2f} s, "
+          f"job {t.get('job_total', 0):.2f} s")
+    for name, e in s["evaluation"].items():
+        line = f"  {name:9s} horizontal RMS {e['rms_h_m']:.3f} m, max {e['max_h_m']:.3f} m"
+        if e.get("n_outages"):
+            line += (f"; outages: end {e['end_h_err_m_mean']:.3f} m (mean), in-outage RMS "
+                     f"{e['rms_h_err_m_mean']:.3f} m, non-outage RMS "
+                     f"{e['non_outage_rms_h_m']:.3f} m")
+        print(line)
