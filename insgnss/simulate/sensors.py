@@ -105,7 +105,7 @@ def gauss_markov(rng: np.random.Generator, n: int, dt: float, sigma, tau, size: 
     """
     sigma = np.broadcast_to(np.asarray(sigma, float), (size,))
     tau = np.broadcast_to(np.asarray(tau, float), (size,))
-    w = rng.standard_normal((n, size))
+    w = rng.standard_normal((size, n)).T  # column-contiguous: lfilter runs along memory
     phi = np.exp(-dt / tau)
     w[1:] *= sigma * np.sqrt(1.0 - phi * phi)
     w[0] *= sigma  # stationary start

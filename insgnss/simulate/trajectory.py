@@ -581,13 +581,22 @@ def generate(
         total = plan[-1]["stop"] if duration is None else float(duration)
         t = _time_grid(total, rate, start_time)
         vh, psi, psid, vu, coord = _vehicle_channels(t - start_time, plan, speed, heading)
-        vel = np.column_stack([vh * np.sin(psi), vh * np.cos(psi), vu])
+        vel = np.empty((t.size, 3))
+        np.multiply(vh, np.sin(psi), out=vel[:, 0])
+        np.multiply(vh, np.cos(psi), out=vel[:, 1])
+        vel[:, 2] = vu
         roll, pitch = _vehicle_attitude(vehicle, vh, vu, psid, coord, roll_gain, g)
         stationary = (vh == 0.0) & (vu == 0.0) & (psid == 0.0)
         lat0, lon0, h0 = lat, lon, height
         seg_table = [{k: p[k] for k in ("type", "start", "stop", "duration")} for p in plan]
     pos = integrate_position(t, vel, lat0, lon0, h0)
     heading_out = np.mod(psi, 2.0 * np.pi)
-    data = np.column_stack([pos, vel, roll, pitch, heading_out, stationary.astype(float)])
+    data = np.empty((t.size, 10))
+    data[:, 0:3] = pos
+    data[:, 3:6] = vel
+    data[:, 6] = roll
+    data[:, 7] = pitch
+    data[:, 8] = heading_out
+    data[:, 9] = stationary
     truth = pd.DataFrame(data, index=pd.Index(t, name="time"), columns=NAV_COLS + ["stationary"])
     return Trajectory(truth=truth, vehicle=vehicle, segments=seg_table)
