@@ -100,6 +100,11 @@ def _days_from_civil(y, m, d):
     return era * 146097 + doe - 719468
 
 
+def _header_line(rows) -> int | None:
+    before = [n for n, _ in rows.comments if n < int(rows.line_no[0])]
+    return before[-1] if before else None
+
+
 def _calendar_seconds(stamps, line_no, file, system: str) -> np.ndarray:
     """GPS seconds of ``"yyyy/mm/dd hh:mm:ss.sss"`` stamps in ``system`` (GPST, UTC, JST)."""
     parts = []
@@ -165,7 +170,7 @@ def read_rtklib_pos(path: str | os.PathLike, *, time_base: str = "gps",
         fields, pos = list(names), "ecef"
     else:
         raise InputFormatError("unsupported solution format", file=path,
-                               row=rows.header_line or (rows.comments[-1][0] if rows.comments else 1),
+                               row=_header_line(rows) or 1,
                                column=names[0],
                                expected="latitude/longitude/height or x/y/z-ecef columns",
                                found=repr(names[0]))
@@ -185,9 +190,16 @@ def read_rtklib_pos(path: str | os.PathLike, *, time_base: str = "gps",
         t = gps_seconds_from_week_sow(wt[:, 0], wt[:, 1])
         if system != "GPST":
             raise InputFormatError("week/seconds time must be GPST", file=path,
-                                   row=rows.header_line, column=system, expected="GPST",
+                                   row=_header_line(rows), column=system, expected="GPST",
                                    found=system)
     col = {_key(f): i for i, f in enumerate(fields)}
+    need = {"llh": ("latitude", "longitude", "height"), "dms": ("height",),
+            "ecef": ("x-ecef", "y-ecef", "z-ecef")}[pos]
+    for name in need:
+        if name not in col:
+            raise InputFormatError("missing column", file=path, row=_header_line(rows),
+                                   column=name, expected=f"a column {name!r}",
+                                   found=", ".join(fields))
 
     def get(name):
         return values[:, col[name]] if name in col else None
@@ -217,7 +229,7 @@ def read_rtklib_pos(path: str | os.PathLike, *, time_base: str = "gps",
                 line_no, file, unit="m")
     for name in std_names[:3]:
         if name not in col:
-            raise InputFormatError("missing column", file=path, row=rows.header_line, column=name,
+            raise InputFormatError("missing column", file=path, row=_header_line(rows), column=name,
                                    expected=f"a column {name!r}", found=", ".join(fields))
         check_range(get(name), 0, 1e7, fields[col[name]], line_no, file, unit="m")
     sd = [get(n) if n in col else np.zeros(len(t)) for n in std_names]
@@ -359,25 +371,27 @@ def read_rtklib_tag(path: str | os.PathLike) -> TimeTag:
     if not body:
         raise InputFormatError("no time-tag records", file=path, column="records",
                                expected="at least one (tick, file position) record", found="none")
-    ticks = fpos = None
-    for size, fmt in ((8, [("tick", "<u4"), ("fpos", "<u4")]), (12, [("tick", "<u4"), ("fpos", "<u8")])):
-        if len(body) % size:
-            continue
-        rec = np.frombuffer(body, dtype=np.dtype(fmt))
-        if np.all(np.diff(rec["tick"].astype(np.int64)) >= 0) and \
-                np.all(np.diff(rec["fpos"].astype(np.int64)) >= 0):
-            ticks, fpos = rec["tick"].astype(np.int64), rec["fpos"].astype(np.int64)
+    sizes = [size for size in (8, 12) if len(body) % size == 0]
+    if not sizes:
+        raise InputFormatError("truncated time-tag record", file=path, row=len(body) // 8 + 1,
+                               column="records", expected="8- or 12-byte records",
+                               found=f"{len(body)} bytes of records")
+    failure = None
+    for size in sizes:
+        rec = np.frombuffer(body, dtype=np.dtype([("tick", "<u4"),
+                                                  ("fpos", "<u4" if size == 8 else "<u8")]))
+        ticks, fpos = rec["tick"].astype(np.int64), rec["fpos"].astype(np.int64)
+        bad_t = np.flatnonzero(np.diff(ticks) < 0)
+        bad_f = np.flatnonzero(np.diff(fpos) < 0)
+        if not bad_t.size and not bad_f.size:
             break
-    if ticks is None:
-        if len(body) % 8 and len(body) % 12:
-            raise InputFormatError("truncated time-tag record", file=path,
-                                   row=len(body) // 8 + 1, column="records",
-                                   expected="8- or 12-byte records", found=f"{len(body)} bytes")
-        rec = np.frombuffer(body[: len(body) // 8 * 8], dtype="<u4").reshape(-1, 2).astype(np.int64)
-        bad = np.flatnonzero(np.diff(rec[:, 0]) < 0)
-        k = int(bad[0]) + 1 if bad.size else int(np.flatnonzero(np.diff(rec[:, 1]) < 0)[0]) + 1
-        raise TimeOrderError("time-tag records out of order", file=path, row=k + 1,
-                             column="tick" if bad.size else "fpos",
-                             expected=f">= {rec[k - 1].tolist()}", found=str(rec[k].tolist()))
+        if failure is None:
+            k = int(bad_t[0] if bad_t.size else bad_f[0]) + 1
+            arr = ticks if bad_t.size else fpos
+            failure = (k, "tick" if bad_t.size else "fpos", int(arr[k - 1]), int(arr[k]))
+    else:
+        k, name, prev, cur = failure
+        raise TimeOrderError("time-tag records out of order", file=path, row=k + 1, column=name,
+                             expected=f">= {prev}", found=str(cur))
     start = float(time_s) - UNIX_GPST_OFFSET + float(sec)
     return TimeTag(path, version.strip(), int(tick_f), start, ticks, fpos)
