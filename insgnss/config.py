@@ -115,6 +115,8 @@ SCHEMA: dict[str, Any] = {
         "zaru": _spec(bool, False),
         "zupt_std": _spec(_NUM, 0.02),
         "zupt_interval": _spec(_NUM, 0.1, "ZUPT update interval during stillness [s]"),
+        "zupt_max_speed": _spec(_NUM, 1.0, "apply ZUPT/ZARU only below this nominal speed "
+                                "[m/s] (0: always; vehicles at constant speed look still)"),
         "detector": _spec(dict, {}, "stillness detector settings (docs/zupt.md)"),
         "static_intervals": _spec(list, None, "declared still intervals [[t0, t1], ...]"),
         "nhc": _spec(bool, False, "non-holonomic constraint (land vehicles)"),

@@ -361,6 +361,38 @@ def _heading_from_course(imu, gnss, res, min_speed, w_mean) -> float:
 
 
 # --- measurements -----------------------------------------------------------------------------------
+class SpeedGatedZupt(Zupt):
+    """ZUPT applied only while the nominal speed is below ``max_speed``.
+
+    An IMU stillness detector cannot tell steady straight motion from rest (both give constant
+    specific force and no rotation; only vibration differs), so a vehicle at constant speed can
+    be flagged still. The nominal speed of the filter (GNSS-aided, or a short dead-reckoning
+    extrapolation during outages) resolves that ambiguity.
+    """
+
+    def __init__(self, times, std, max_speed: float, **kw):
+        super().__init__(times, std=std, **kw)
+        self.max_speed = float(max_speed)
+
+    def evaluate(self, i, nav):
+        if np.linalg.norm(nav.vel) > self.max_speed:
+            return None
+        return super().evaluate(i, nav)
+
+
+class SpeedGatedZaru(Zaru):
+    """ZARU applied only while the nominal speed is below ``max_speed`` (see SpeedGatedZupt)."""
+
+    def __init__(self, times, max_speed: float, **kw):
+        super().__init__(times, **kw)
+        self.max_speed = float(max_speed)
+
+    def evaluate(self, i, nav):
+        if np.linalg.norm(nav.vel) > self.max_speed:
+            return None
+        return super().evaluate(i, nav)
+
+
 def stillness_times(job: Job, imu: pd.DataFrame) -> np.ndarray:
     """Times (at the ZUPT interval) when the IMU is still, from the detector and/or declared
     static intervals."""
@@ -418,10 +450,12 @@ def build_measurements(job: Job, inputs: Inputs, windows, imu: pd.DataFrame) -> 
     if a["zupt"] or a["zaru"]:
         ts = stillness_times(job, imu)
         if ts.size:
+            vmax = a["zupt_max_speed"]
             if a["zupt"]:
-                out.append(Zupt(ts, std=a["zupt_std"]))
+                out.append(SpeedGatedZupt(ts, a["zupt_std"], vmax) if vmax else
+                           Zupt(ts, std=a["zupt_std"]))
             if a["zaru"]:
-                out.append(Zaru(ts))
+                out.append(SpeedGatedZaru(ts, vmax) if vmax else Zaru(ts))
     if a["nhc"]:
         t = imu.index.to_numpy(float)
         tn = t[0] + np.arange(1, int((t[-1] - t[0]) / a["nhc_interval"])) * a["nhc_interval"]
@@ -529,8 +563,11 @@ def run_job(job: Job, *, progress: bool | None = None, seed: int | None = None,
     timing = dict(res.timing)
     timing["read"] = t_read
     timing["job_total"] = _time.perf_counter() - t_start
+    name = job["job"]["name"]
+    if name == "job" and job.simulation.get("scenario", {}).get("name"):
+        name = job.simulation["scenario"]["name"]
     out.summary = {
-        "job": job["job"]["name"], "source": inputs.source, "seed": inputs.seed,
+        "job": name, "source": inputs.source, "seed": inputs.seed,
         "complete": bool(res.complete), "error": None if res.error is None else str(res.error),
         "imu_samples": int(len(imu)), "initialization": {
             "method": init.method, "heading_source": init.heading_source,

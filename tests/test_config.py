@@ -67,3 +67,10 @@ def test_schema_markdown_lists_every_table():
     md = schema_markdown()
     for t in ("[inputs.imu]", "[aiding]", "[outages.periodic]", "[filter]", "[outputs]"):
         assert t in md
+
+
+def test_simulation_tables_match_simulator():
+    from insgnss.config import SIMULATION_TABLES
+    from insgnss.simulate.scenario import SIM_TABLES
+
+    assert set(SIM_TABLES) <= set(SIMULATION_TABLES)
