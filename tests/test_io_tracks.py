@@ -171,3 +171,15 @@ def test_reference_reader_formats(tmp_path):
 def test_real_reference_fixed_epochs(drive_dir):
     ref = read_reference(drive_dir / "gnss_1934_sf.pos", fix_only=True)
     assert len(ref) == 2189 and (ref["q"] == 1).all()
+
+
+def test_a_table_is_never_written_over_its_own_source(tmp_path):
+    p = write_trajectory_csv(traj(5), tmp_path / "a.csv")
+    before = p.read_bytes()
+    back = read_trajectory_csv(p)
+    for writer in (write_trajectory_csv, write_eval_csv, write_kml, write_geojson):
+        with pytest.raises(ConfigError, match="overwrite an input"):
+            writer(back, p)
+    with pytest.raises(ConfigError):
+        write_kml(traj(5), p, points=back)
+    assert p.read_bytes() == before

@@ -229,7 +229,8 @@ def imu_table_from_arrays(
                                       column=names[0])
 
     M = np.eye(3) if mounting is None else np.asarray(mounting, float)
-    if M.shape != (3, 3) or not np.allclose(M @ M.T, np.eye(3), atol=1e-9):
+    if M.shape != (3, 3) or not np.allclose(M @ M.T, np.eye(3), atol=1e-9) \
+            or np.linalg.det(M) < 0:
         raise ConfigError("mounting matrix must be a 3x3 rotation", column="mounting",
                           found=repr(mounting))
     data = np.column_stack([gyro @ M.T, accel @ M.T])

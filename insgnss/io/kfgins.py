@@ -188,7 +188,7 @@ def write_kfgins_nav(df: pd.DataFrame, path: str | os.PathLike, *, week: int | N
     if missing:
         raise InputFormatError("trajectory table lacks columns for a .nav file", column=missing[0],
                                expected=", ".join(need), found=", ".join(map(str, df.columns)))
-    ensure_not_input(path, protect)
+    ensure_not_input(path, [*protect, df.attrs.get("source")])
     t = np.asarray(df.index, float)
     base = df.attrs.get("time_base")
     if base == "gps" or (base not in ("sow",) and t.size and t[0] > 1e7):

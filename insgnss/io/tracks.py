@@ -74,7 +74,7 @@ def write_trajectory_csv(df: pd.DataFrame, path: str | os.PathLike, *,
                          protect: Sequence[str | os.PathLike] = (),
                          float_format: str = "%.15g") -> Path:
     """Write a time-indexed table as a native insgnss CSV (atomically)."""
-    ensure_not_input(path, protect)
+    ensure_not_input(path, [*protect, df.attrs.get("source")])
     out = to_file_columns(df)
     out.index = pd.Index(np.asarray(df.index, float), name="time")
     return atomic_write(path, lambda p: out.to_csv(p, float_format=float_format, na_rep="nan"))
@@ -125,7 +125,7 @@ def write_eval_csv(df: pd.DataFrame, path: str | os.PathLike, *, week: int | Non
     The time is converted from ``attrs["time_base"]`` (``"sow"`` needs ``week=`` or
     ``attrs["gps_week"]``); tables without a declared base are written as they are.
     """
-    ensure_not_input(path, protect)
+    ensure_not_input(path, [*protect, df.attrs.get("source")])
     llh = _llh_deg(df, "the scorer CSV")
     base = df.attrs.get("time_base", "unspecified")
     t = np.asarray(df.index, float)
@@ -142,6 +142,11 @@ def write_eval_csv(df: pd.DataFrame, path: str | os.PathLike, *, week: int | Non
                                df["heading"].to_numpy(float))
         out["roll_deg"], out["pitch_deg"], out["yaw_deg"] = np.degrees(r), np.degrees(p), np.degrees(y)
     return atomic_write(path, lambda p: out.to_csv(p, index=False, float_format="%.10f"))
+
+
+def _sources(tracks: dict, points) -> list:
+    tables = list(tracks.values()) + ([points] if points is not None else [])
+    return [t.attrs.get("source") for t in tables]
 
 
 def _rounded(v: np.ndarray) -> list:
@@ -181,8 +186,8 @@ def write_kml(tracks: pd.DataFrame | Mapping[str, pd.DataFrame], path: str | os.
     if altitude_mode not in ALTITUDE_MODES:
         raise ConfigError("unknown altitude mode", column="altitude_mode",
                           expected=", ".join(ALTITUDE_MODES), found=repr(altitude_mode))
-    ensure_not_input(path, protect)
     tr = _tracks(tracks)
+    ensure_not_input(path, [*protect, *_sources(tr, points)])
     ET.register_namespace("", KML_NS)
     q = f"{{{KML_NS}}}"
     kml = ET.Element(q + "kml")
@@ -220,9 +225,10 @@ def write_geojson(tracks: pd.DataFrame | Mapping[str, pd.DataFrame], path: str |
                   points: pd.DataFrame | None = None, points_name: str = "GNSS",
                   decimate: int = 1, protect: Sequence[str | os.PathLike] = ()) -> Path:
     """Write tracks (and optional points) as a GeoJSON FeatureCollection (atomically)."""
-    ensure_not_input(path, protect)
+    tr = _tracks(tracks)
+    ensure_not_input(path, [*protect, *_sources(tr, points)])
     features = []
-    for tname, df in _tracks(tracks).items():
+    for tname, df in tr.items():
         v = _decimate(_llh_deg(df, f"track {tname!r}"), decimate)
         t = np.asarray(df.index, float)
         features.append({
