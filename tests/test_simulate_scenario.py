@@ -127,6 +127,7 @@ def test_metadata_records_drawn_parameters():
     assert m["imu"]["grade"] == "tactical"
     # the datasheet override is converted once, in ImuErrorModel.from_datasheet
     assert abs(m["imu"]["model_si"]["gyro_arw"] - 0.2 * np.pi / 180 / 60) < 1e-15
+    assert r.imu_model.gyro_arw == m["imu"]["model_si"]["gyro_arw"]
     assert m["imu"]["model_si"]["accel_vrw"] == GRADES["tactical"].accel_vrw
     drawn = np.array(m["imu"]["drawn"]["gyro_bias_turn_on"])
     assert np.allclose(r.imu_bias[["gyro_bias_x", "gyro_bias_y", "gyro_bias_z"]].iloc[0], drawn,
@@ -194,5 +195,5 @@ def test_ideal_imu_without_imu_table():
     cfg = copy.deepcopy(SMALL)
     del cfg["imu"]
     r = simulate_scenario(cfg)
-    assert r.imu.equals(r.imu_ideal) and r.imu_bias is None
+    assert r.imu.equals(r.imu_ideal) and r.imu_bias is None and r.imu_model is None
     assert r.metadata["imu"]["grade"] == "ideal"

@@ -336,8 +336,9 @@ class SimulationResult:
 
     ``truth`` (NAV_COLS + ``stationary``), ``imu`` (with errors), ``imu_ideal`` (inverse
     mechanization of the truth), ``imu_bias`` (bias time series, truth for the filter), ``gnss``,
-    ``odometer``, ``magnetometer`` (None when not configured) and ``metadata`` (JSON-ready dict:
-    units, frames, seed, configuration and the error parameters actually drawn).
+    ``odometer``, ``magnetometer`` (None when not configured), ``metadata`` (JSON-ready dict:
+    units, frames, seed, configuration and the error parameters actually drawn) and
+    ``imu_model`` (the :class:`~insgnss.imu.ImuErrorModel` used, grade plus overrides).
     """
 
     truth: pd.DataFrame
@@ -348,6 +349,7 @@ class SimulationResult:
     odometer: pd.DataFrame | None
     magnetometer: pd.DataFrame | None
     metadata: dict = field(default_factory=dict)
+    imu_model: ImuErrorModel | None = None  #: the error model used (SI), None for ideal sensors
 
     @property
     def seed(self) -> int:
@@ -492,6 +494,7 @@ def simulate_scenario(source: str | os.PathLike | dict, seed: int | None = None,
 
     # IMU
     imu_bias = None
+    model = None
     if "imu" in cfg:
         model, opts = _imu_model(_Table(cfg["imu"], "imu", file, None))
         errs = simulate_imu(ideal, model, streams["imu"], **opts)
@@ -521,4 +524,4 @@ def simulate_scenario(source: str | os.PathLike | dict, seed: int | None = None,
     meta["config"] = {k: v for k, v in cfg.items() if k in SIM_TABLES}
     meta["config"]["scenario"] = {**cfg["scenario"], "seed": seed}
     return SimulationResult(truth=truth, imu=imu, imu_ideal=ideal, imu_bias=imu_bias, gnss=gnss,
-                            odometer=odo, magnetometer=mag, metadata=meta)
+                            odometer=odo, magnetometer=mag, metadata=meta, imu_model=model)
