@@ -114,3 +114,26 @@ def test_real_drive(drive_dir):
                                    mounting_rpy_deg=DRIVE_0708["mounting_rpy_deg"],
                                    time_offset=DRIVE_0708["time_offset"])
     np.testing.assert_allclose(imu2.index - imu.index, -0.125, atol=1e-6)
+
+
+def test_real_drive_with_dropped_samples_and_a_logger_gap(drive_dir, tmp_path):
+    """Issue 8: 1 % of the samples dropped at random and a 0.5 s gap: read, bridged, reported."""
+    lines = (drive_dir / "imu_1934.csv").read_text().splitlines()
+    rng = np.random.default_rng(8)
+    inner = np.arange(1, len(lines) - 1)
+    drop = set(rng.choice(inner, size=len(inner) // 100, replace=False).tolist())
+    drop |= set(range(20000, 20050))  # 50 consecutive samples = 0.5 s
+    kept = [s for i, s in enumerate(lines) if i not in drop]
+    p = tmp_path / "imu_1934.csv"
+    p.write_text("\n".join(kept) + "\n")
+    (tmp_path / "imu_1934.csv.tag").write_bytes((drive_dir / "imu_1934.csv.tag").read_bytes())
+    with pytest.warns(Warning) as rec:
+        imu = read_rtklibexplorer_imu(p, mounting_rpy_deg=DRIVE_0708["mounting_rpy_deg"],
+                                      rate_hz=DRIVE_0708["rate_hz"])
+    assert any("bridged" in str(r.message) for r in rec)
+    assert len(imu) == len(lines) - 2 - len(drop)
+    gaps = imu.attrs["gaps"]
+    assert all(g["action"] == "bridged" for g in gaps)
+    longest = max(gaps, key=lambda g: g["duration"])
+    assert longest["duration"] == pytest.approx(0.51, abs=0.012) and longest["missing"] >= 49
+    assert sum(g["missing"] for g in gaps) == pytest.approx(len(drop), rel=0.02)
