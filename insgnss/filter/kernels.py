@@ -1,0 +1,577 @@
+"""Compiled (numba) kernels of the error-state filter: nominal propagation with accumulation of
+the error dynamics, discretisation (second order or van Loan), feedback, the backward pass of
+the smoother and the assembly of the IMU-rate output tables.
+
+Nothing here loops in Python per IMU sample; the engine calls :func:`propagate_nominal` and
+:func:`discretize` once per filter epoch.
+
+Splitting at epochs between samples: an IMU increment row covers ``(t[j-1], t[j]]``; when an
+epoch falls inside it, the increment is split linearly (constant rate over the sample
+interval), the first share is applied up to the epoch and the rest on the next call. ``frac``
+is the share of row ``j`` already consumed.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+from ..attitude import rotvec_to_dcm_nb
+from ..earth import radii
+from ..mechanization.strapdown import strapdown_step
+from .models import accumulate_error_dynamics
+
+DISC_SECOND_ORDER = 0
+DISC_VANLOAN = 1
+
+
+@njit(cache=True)
+def propagate_nominal(t, dth, dv, j, frac, t_end, pos, vel, C, pnom, i_sg, i_sa,
+                      gravity_model, attitude_update, sub_T, Fint, Qint, sub_dt, q_g, q_a,
+                      out_pos, out_vel, out_C, out_seg, seg_id, rates):
+    """Mechanize from the current point (row ``j``, share ``frac`` consumed) to ``t_end``.
+
+    The nominal state ``pos, vel, C`` is advanced in place using the increments compensated
+    with the current bias (and scale-factor) estimates held in ``pnom`` (the parameter part of
+    the nominal state, error-state indices 9 onwards). Each completed row ``j`` is stored in
+    ``out_pos[j], out_vel[j], out_C[j]`` with ``out_seg[j] = seg_id``.
+
+    Over covariance sub-intervals of length ``sub_T`` (restarted at the segment start, the
+    last one possibly shorter), ``Fint[s]`` receives ``int F dt``, ``Qint[s, 0 / 1]`` the
+    integrals of ``C diag(q_g) C^T`` and ``C diag(q_a) C^T`` and ``sub_dt[s]`` the duration.
+
+    ``rates`` (4, 3) receives the compensated angular rate and specific force of the last
+    interval (rows 0, 2) and their means over the segment (rows 1, 3).
+
+    Returns ``(j, frac, n_sub)``.
+    """
+    n_t = t.shape[0]
+    n = Fint.shape[1]
+    work = np.empty((7, 3, 3))  # strapdown_step scratch (see its docstring)
+    dthc = np.empty(3)
+    dvc = np.empty(3)
+    sum_th = np.zeros(3)
+    sum_dv = np.zeros(3)
+    sum_dt = 0.0
+    s = -1
+    acc = 0.0
+    while j < n_t:
+        dt_full = t[j] - t[j - 1]
+        t_start = t[j - 1] + frac * dt_full
+        if t_end <= t_start:
+            break
+        full = t[j] <= t_end
+        if full:
+            a = 1.0 - frac
+        else:
+            a = (t_end - t_start) / dt_full
+        dt_s = a * dt_full
+        for i in range(3):
+            g = a * dth[j, i] - pnom[i] * dt_s
+            f = a * dv[j, i] - pnom[3 + i] * dt_s
+            if i_sg >= 0:
+                g /= 1.0 + pnom[i_sg - 9 + i]
+            if i_sa >= 0:
+                f /= 1.0 + pnom[i_sa - 9 + i]
+            dthc[i] = g
+            dvc[i] = f
+        if s < 0 or acc >= sub_T * (1.0 - 1e-9):
+            s += 1
+            for r in range(n):
+                for c in range(n):
+                    Fint[s, r, c] = 0.0
+            for r in range(2):
+                for c in range(3):
+                    for k in range(3):
+                        Qint[s, r, c, k] = 0.0
+            sub_dt[s] = 0.0
+            acc = 0.0
+        accumulate_error_dynamics(Fint[s], dt_s, pos[0], pos[2], vel, C, dthc, dvc, i_sg, i_sa)
+        for r in range(3):
+            for c in range(r, 3):
+                qg = 0.0
+                qa = 0.0
+                for k in range(3):
+                    qg += C[r, k] * q_g[k] * C[c, k]
+                    qa += C[r, k] * q_a[k] * C[c, k]
+                Qint[s, 0, r, c] += qg * dt_s
+                Qint[s, 1, r, c] += qa * dt_s
+                if c != r:
+                    Qint[s, 0, c, r] += qg * dt_s
+                    Qint[s, 1, c, r] += qa * dt_s
+        sub_dt[s] += dt_s
+        acc += dt_s
+        strapdown_step(pos, vel, C, dthc, dvc, dt_s, gravity_model, attitude_update, False, work)
+        for i in range(3):
+            sum_th[i] += dthc[i]
+            sum_dv[i] += dvc[i]
+            if dt_s > 0.0:
+                rates[0, i] = dthc[i] / dt_s
+                rates[2, i] = dvc[i] / dt_s
+        sum_dt += dt_s
+        if full:
+            for i in range(3):
+                out_pos[j, i] = pos[i]
+                out_vel[j, i] = vel[i]
+                for k in range(3):
+                    out_C[j, i, k] = C[i, k]
+            out_seg[j] = seg_id
+            j += 1
+            frac = 0.0
+        else:
+            frac += a
+            break
+    if sum_dt > 0.0:
+        for i in range(3):
+            rates[1, i] = sum_th[i] / sum_dt
+            rates[3, i] = sum_dv[i] / sum_dt
+    return j, frac, s + 1
+
+
+@njit(cache=True)
+def nis(S, y):
+    """Normalised innovation squared ``y^T S^-1 y`` by Cholesky; NaN if S is not PD."""
+    m = y.shape[0]
+    L = np.zeros((m, m))
+    for i in range(m):
+        for k in range(i + 1):
+            v = S[i, k]
+            for q in range(k):
+                v -= L[i, q] * L[k, q]
+            if i == k:
+                if not v > 0.0:
+                    return np.nan
+                L[i, i] = np.sqrt(v)
+            else:
+                L[i, k] = v / L[k, k]
+    w = np.empty(m)
+    out = 0.0
+    for i in range(m):
+        v = y[i]
+        for q in range(i):
+            v -= L[i, q] * w[q]
+        w[i] = v / L[i, i]
+        out += w[i] * w[i]
+    return out
+
+
+# --- small dense linear algebra (explicit loops: fast for n <= 30 and quick to compile) ---------
+@njit(cache=True)
+def _mm(A, B, out):
+    """``out = A @ B`` (out must not alias A or B)."""
+    n, m = A.shape
+    p = B.shape[1]
+    for i in range(n):
+        for k in range(p):
+            out[i, k] = 0.0
+        for j in range(m):
+            a = A[i, j]
+            if a != 0.0:
+                for k in range(p):
+                    out[i, k] += a * B[j, k]
+
+
+@njit(cache=True)
+def _mmt(A, B, out):
+    """``out = A @ B.T``."""
+    n, m = A.shape
+    p = B.shape[0]
+    for i in range(n):
+        for k in range(p):
+            v = 0.0
+            for j in range(m):
+                v += A[i, j] * B[k, j]
+            out[i, k] = v
+
+
+@njit(cache=True)
+def _sparse(A, ri, ci, vals):
+    """Non-zero entries of A into (ri, ci, vals); returns their number."""
+    k = 0
+    for i in range(A.shape[0]):
+        for j in range(A.shape[1]):
+            v = A[i, j]
+            if v != 0.0:
+                ri[k] = i
+                ci[k] = j
+                vals[k] = v
+                k += 1
+    return k
+
+
+@njit(cache=True)
+def _spmm(ri, ci, vals, nnz, X, out):
+    """``out = A @ X`` for sparse A given by its entries."""
+    out[:, :] = 0.0
+    p = X.shape[1]
+    for q in range(nnz):
+        i, j, a = ri[q], ci[q], vals[q]
+        for k in range(p):
+            out[i, k] += a * X[j, k]
+
+
+@njit(cache=True)
+def _mmspt(X, ri, ci, vals, nnz, out):
+    """``out = X @ A^T`` for sparse A given by its entries."""
+    out[:, :] = 0.0
+    m = X.shape[0]
+    for q in range(nnz):
+        r, c, a = ri[q], ci[q], vals[q]
+        for i in range(m):
+            out[i, r] += X[i, c] * a
+
+
+@njit(cache=True)
+def expm_nb(A):
+    """Matrix exponential by scaling and squaring with a Taylor series (relative accuracy
+    ~1e-15 for the block matrices of van Loan's method)."""
+    n = A.shape[0]
+    nrm = 0.0
+    for i in range(n):
+        r = 0.0
+        for k in range(n):
+            r += abs(A[i, k])
+        nrm = max(nrm, r)
+    sq = 0
+    if nrm > 0.5:
+        sq = int(np.ceil(np.log2(nrm / 0.5)))
+    X = A / (2.0**sq)
+    E = np.eye(n) + X
+    term = X.copy()
+    tmp = np.empty((n, n))
+    for k in range(2, 20):
+        _mm(term, X, tmp)
+        mx = 0.0
+        for i in range(n):
+            for j in range(n):
+                term[i, j] = tmp[i, j] / k
+                E[i, j] += term[i, j]
+                mx = max(mx, abs(term[i, j]))
+        if mx < 1e-18:
+            break
+    for _ in range(sq):
+        _mm(E, E, tmp)
+        E[:, :] = tmp
+    return E
+
+
+@njit(cache=True)
+def discretize(Fint, Qint, sub_dt, n_sub, decay, qdiag, method, Phi_tot, Qd_tot):
+    """Transition matrix and process noise of a segment from its covariance sub-intervals.
+
+    For each sub-interval of duration T with ``FT = int F dt - diag(decay) T`` and
+    ``QT = int G Q G^T dt``:
+
+    - ``method = 0`` (second order): ``Phi = I + FT + FT^2 / 2``,
+      ``Qd = QT + (FT QT + QT FT^T) / 2 + (FT^2 QT + 2 FT QT FT^T + QT FT^T^2) / 6``
+      (the Taylor series of van Loan's integral to third order in T);
+    - ``method = 1`` (van Loan): ``expm([[-F, Q], [0, F^T]] T)`` gives ``Phi`` and ``Qd``
+      exactly for the interval-averaged F and Q.
+
+    The sub-interval results are composed: ``Phi_tot <- Phi Phi_tot``,
+    ``Qd_tot <- Phi Qd_tot Phi^T + Qd``, which is exactly what propagating P over every
+    sub-interval in turn would give. Returns the total duration.
+    """
+    n = Phi_tot.shape[0]
+    total = 0.0
+    FT = np.empty((n, n))
+    QT = np.zeros((n, n))
+    Phi = np.empty((n, n))
+    Qd = np.empty((n, n))
+    A = np.empty((n, n))
+    B = np.empty((n, n))
+    Cq = np.empty((n, n))
+    tmp = np.empty((n, n))
+    ri = np.empty(n * n, np.int64)
+    ci = np.empty(n * n, np.int64)
+    vals = np.empty(n * n)
+    first = True
+    for s in range(n_sub):
+        T = sub_dt[s]
+        if T <= 0.0:
+            continue
+        total += T
+        for r in range(n):
+            for c in range(n):
+                FT[r, c] = Fint[s, r, c]
+                QT[r, c] = 0.0
+            FT[r, r] -= decay[r] * T
+            QT[r, r] = qdiag[r] * T
+        for r in range(3):
+            for c in range(3):
+                QT[6 + r, 6 + c] += Qint[s, 0, r, c]
+                QT[3 + r, 3 + c] += Qint[s, 1, r, c]
+        if method == DISC_VANLOAN:
+            Mb = np.zeros((2 * n, 2 * n))
+            for r in range(n):
+                for c in range(n):
+                    Mb[r, c] = -FT[r, c]
+                    Mb[r, n + c] = QT[r, c]
+                    Mb[n + r, n + c] = FT[c, r]
+            E = expm_nb(Mb)
+            for r in range(n):
+                for c in range(n):
+                    Phi[r, c] = E[n + c, n + r]
+                    A[r, c] = E[r, n + c]
+            _mm(Phi, A, Qd)
+        else:
+            nf = _sparse(FT, ri, ci, vals)
+            _spmm(ri, ci, vals, nf, FT, A)  # FT^2
+            for r in range(n):
+                for c in range(n):
+                    Phi[r, c] = FT[r, c] + 0.5 * A[r, c]
+                Phi[r, r] += 1.0
+            _spmm(ri, ci, vals, nf, QT, A)  # A = FT QT
+            _spmm(ri, ci, vals, nf, A, B)  # B = FT^2 QT
+            _mmspt(A, ri, ci, vals, nf, Cq)  # Cq = FT QT FT^T
+            for r in range(n):
+                for c in range(n):
+                    Qd[r, c] = (QT[r, c] + 0.5 * (A[r, c] + A[c, r])
+                                + (B[r, c] + B[c, r] + 2.0 * Cq[r, c]) / 6.0)
+        for r in range(n):
+            for c in range(r + 1, n):
+                v = 0.5 * (Qd[r, c] + Qd[c, r])
+                Qd[r, c] = v
+                Qd[c, r] = v
+        if first:
+            Phi_tot[:, :] = Phi
+            Qd_tot[:, :] = Qd
+            first = False
+        else:
+            npf = _sparse(Phi, ri, ci, vals)
+            _spmm(ri, ci, vals, npf, Phi_tot, tmp)
+            Phi_tot[:, :] = tmp
+            _spmm(ri, ci, vals, npf, Qd_tot, tmp)
+            _mmspt(tmp, ri, ci, vals, npf, A)
+            for r in range(n):
+                for c in range(n):
+                    Qd_tot[r, c] = A[r, c] + Qd[r, c]
+    if first:
+        for r in range(n):
+            for c in range(n):
+                Phi_tot[r, c] = 1.0 if r == c else 0.0
+                Qd_tot[r, c] = 0.0
+    return total
+
+
+@njit(cache=True)
+def apply_feedback(pos, vel, C, pnom, x):
+    """Closed-loop correction of the nominal state by the error estimate ``x`` (nominal minus
+    true): position (ENU metres -> lat/lon/h), velocity, attitude ``C <- exp(-[phi x]) C``
+    and the parameters ``pnom -= x[9:]``."""
+    M, N = radii(pos[0])
+    h = pos[2]
+    lat = pos[0]
+    pos[0] -= x[1] / (M + h)
+    pos[1] -= x[0] / ((N + h) * np.cos(lat))
+    pos[2] -= x[2]
+    for i in range(3):
+        vel[i] -= x[3 + i]
+    phi = np.empty(3)
+    phi[0], phi[1], phi[2] = -x[6], -x[7], -x[8]
+    R = np.empty((3, 3))
+    rotvec_to_dcm_nb(phi, R)
+    Cn = np.empty((3, 3))
+    _mm(R, C, Cn)
+    C[:, :] = Cn
+    for i in range(pnom.shape[0]):
+        pnom[i] -= x[9 + i]
+
+
+@njit(cache=True)
+def _chol_solve(P, B, L, out):
+    """``out = P^-1 B`` for symmetric positive definite P (Cholesky); False if not PD."""
+    n = P.shape[0]
+    for i in range(n):
+        for k in range(i + 1):
+            v = P[i, k]
+            for q in range(k):
+                v -= L[i, q] * L[k, q]
+            if i == k:
+                if not v > 0.0:
+                    return False
+                L[i, i] = np.sqrt(v)
+            else:
+                L[i, k] = v / L[k, k]
+    m = B.shape[1]
+    for c in range(m):
+        for i in range(n):  # forward
+            v = B[i, c]
+            for q in range(i):
+                v -= L[i, q] * out[q, c]
+            out[i, c] = v / L[i, i]
+        for i in range(n - 1, -1, -1):  # backward
+            v = out[i, c]
+            for q in range(i + 1, n):
+                v -= L[q, i] * out[q, c]
+            out[i, c] = v / L[i, i]
+    return True
+
+
+@njit(cache=True)
+def rts_backward(Pf, Pp, Phi, fb, n_ep, xs_plus, xs_minus, Ps):
+    """Backward pass of the RTS smoother in closed-loop error-state form.
+
+    For epochs ``e = 0 .. n_ep-1`` with filtered covariance ``Pf[e] = P(e|e)``, predicted
+    ``Pp[e] = P(e|e-1)``, transition ``Phi[e]`` from ``e-1`` to ``e`` and the feedback
+    ``fb[e]`` (the filtered error estimate removed from the nominal at ``e``):
+
+    - ``xs_plus[e]`` is the smoothed error relative to the corrected (post-feedback) nominal
+      at ``e``; ``xs_minus[e] = xs_plus[e] + fb[e]`` the same relative to the pre-feedback
+      nominal, which is what the forward prediction from ``e-1`` refers to;
+    - ``A = P(e|e) Phi[e+1]^T P(e+1|e)^-1``, ``xs_plus[e] = A xs_minus[e+1]`` (the filtered
+      error at ``e`` after the reset is zero and so is its prediction),
+      ``Ps[e] = P(e|e) + A (Ps[e+1] - P(e+1|e)) A^T``.
+
+    Returns the number of epochs where ``P(e+1|e)`` was not positive definite (skipped:
+    the smoothed values there are the filtered ones).
+    """
+    n = Pf.shape[1]
+    At = np.empty((n, n))
+    B = np.empty((n, n))
+    L = np.empty((n, n))
+    D = np.empty((n, n))
+    T1 = np.empty((n, n))
+    bad = 0
+    xs_plus[n_ep - 1, :] = 0.0
+    Ps[n_ep - 1] = Pf[n_ep - 1]
+    xs_minus[n_ep - 1] = fb[n_ep - 1]
+    for e in range(n_ep - 2, -1, -1):
+        # A^T = Pp^-1 (Phi Pf)   (Pf, Pp symmetric)
+        _mm(Phi[e + 1], Pf[e], B)
+        if not _chol_solve(Pp[e + 1], B, L, At):
+            bad += 1
+            xs_plus[e, :] = 0.0
+            Ps[e] = Pf[e]
+        else:
+            for i in range(n):
+                v = 0.0
+                for k in range(n):
+                    v += At[k, i] * xs_minus[e + 1, k]
+                xs_plus[e, i] = v
+            for i in range(n):
+                for k in range(n):
+                    D[i, k] = Ps[e + 1, i, k] - Pp[e + 1, i, k]
+            # Ps = Pf + A D A^T = Pf + At^T D At
+            _mm(D, At, T1)  # D At
+            for i in range(n):
+                for k in range(i, n):
+                    v = 0.0
+                    for q in range(n):
+                        v += At[q, i] * T1[q, k]
+                    Ps[e, i, k] = Pf[e, i, k] + v
+            for i in range(n):
+                for k in range(i + 1, n):
+                    Ps[e, k, i] = Ps[e, i, k]
+        for i in range(n):
+            xs_minus[e, i] = xs_plus[e, i] + fb[e, i]
+    return bad
+
+
+@njit(cache=True)
+def _euler_std(C, Pa):
+    """Std of roll, pitch, heading from the misalignment covariance ``Pa`` (3x3) at ``C``
+    (linearised: ``C_nom = (I + [phi x]) C``)."""
+    # d roll = (C20 dC22 - C22 dC20) / (C20^2 + C22^2); dC = [phi x] C
+    # dC20 = -phi_n C00 + phi_e C10 ; dC22 = -phi_n C02 + phi_e C12 ; dC21 = -phi_n C01 + phi_e C11
+    J = np.zeros((3, 3))
+    d = C[2, 0] ** 2 + C[2, 2] ** 2
+    if d < 1e-12:
+        d = 1e-12
+    J[0, 0] = (C[2, 0] * C[1, 2] - C[2, 2] * C[1, 0]) / d
+    J[0, 1] = (-C[2, 0] * C[0, 2] + C[2, 2] * C[0, 0]) / d
+    cp = np.sqrt(max(1.0 - C[2, 1] ** 2, 1e-12))
+    J[1, 0] = C[1, 1] / cp
+    J[1, 1] = -C[0, 1] / cp
+    h = C[0, 1] ** 2 + C[1, 1] ** 2
+    if h < 1e-12:
+        h = 1e-12
+    J[2, 0] = C[0, 1] * C[2, 1] / h
+    J[2, 1] = C[1, 1] * C[2, 1] / h
+    J[2, 2] = -1.0
+    out = np.empty(3)
+    for r in range(3):
+        v = 0.0
+        for a in range(3):
+            for b in range(3):
+                v += J[r, a] * Pa[a, b] * J[r, b]
+        out[r] = np.sqrt(max(v, 0.0))
+    return out
+
+
+@njit(cache=True)
+def assemble_output(t, out_pos, out_vel, out_C, out_seg, out_post, ep_t, P_start, P_end,
+                    X_start, X_end, pnom_ep, n_rows, correct, out):
+    """IMU-rate output rows: nominal (optionally corrected) navigation state, stds, parameters.
+
+    Sample ``j`` belongs to segment ``e = out_seg[j]`` (``t[e-1] < t_j <= t[e]`` in epoch
+    times). If ``out_post[j]`` the sample sits on epoch ``e`` and holds the post-feedback
+    nominal: it takes ``X_start[e]``, ``P_start[e]``. Otherwise the error and covariance are
+    interpolated linearly in time between ``(X_start[e-1], P_start[e-1])`` at ``t[e-1]`` and
+    ``(X_end[e], P_end[e])`` at ``t[e]``; the parameter nominal is ``pnom_ep[e-1]``.
+
+    Forward run (``correct=False``, ``X`` unused): ``P_start = P(e|e)``, ``P_end = P(e|e-1)``.
+    Smoothed run: ``X_start = xs_plus``, ``X_end = xs_minus``, ``P_start = P_end = Ps``.
+
+    ``out`` columns: lat lon height vel_e vel_n vel_u roll pitch heading, 9 stds (east north
+    up, vel, roll pitch heading), then for each parameter state its value and its std.
+    The corrected attitude is ``exp(-[phi x]) C``.
+    """
+    n = P_start.shape[1]
+    npar = n - 9
+    x = np.empty(n)
+    pdiag = np.empty(n)
+    Pa = np.empty((3, 3))
+    Cc = np.empty((3, 3))
+    R = np.empty((3, 3))
+    phi = np.empty(3)
+    for j in range(n_rows):
+        e = out_seg[j]
+        if out_post[j]:
+            for a in range(n):
+                x[a] = X_start[e, a] if correct else 0.0
+                pdiag[a] = P_start[e, a, a]
+            for a in range(3):
+                for b in range(3):
+                    Pa[a, b] = P_start[e, 6 + a, 6 + b]
+            ep = e
+        else:
+            w = (t[j] - ep_t[e - 1]) / (ep_t[e] - ep_t[e - 1])
+            for a in range(n):
+                x[a] = (1.0 - w) * X_start[e - 1, a] + w * X_end[e, a] if correct else 0.0
+                pdiag[a] = (1.0 - w) * P_start[e - 1, a, a] + w * P_end[e, a, a]
+            for a in range(3):
+                for b in range(3):
+                    Pa[a, b] = (1.0 - w) * P_start[e - 1, 6 + a, 6 + b] + w * P_end[e, 6 + a, 6 + b]
+            ep = e - 1
+        lat = out_pos[j, 0]
+        h = out_pos[j, 2]
+        M, N = radii(lat)
+        out[j, 0] = lat - x[1] / (M + h)
+        out[j, 1] = out_pos[j, 1] - x[0] / ((N + h) * np.cos(lat))
+        out[j, 2] = h - x[2]
+        for i in range(3):
+            out[j, 3 + i] = out_vel[j, i] - x[3 + i]
+            phi[i] = -x[6 + i]
+        if correct:
+            rotvec_to_dcm_nb(phi, R)
+            for r in range(3):
+                for c in range(3):
+                    Cc[r, c] = (R[r, 0] * out_C[j, 0, c] + R[r, 1] * out_C[j, 1, c]
+                                + R[r, 2] * out_C[j, 2, c])
+        else:
+            for r in range(3):
+                for c in range(3):
+                    Cc[r, c] = out_C[j, r, c]
+        out[j, 6] = np.arctan2(-Cc[2, 0], Cc[2, 2])
+        out[j, 7] = np.arctan2(Cc[2, 1], np.sqrt(Cc[0, 1] ** 2 + Cc[1, 1] ** 2))
+        hd = np.arctan2(Cc[0, 1], Cc[1, 1])
+        out[j, 8] = hd + 2.0 * np.pi if hd < 0.0 else hd
+        for i in range(6):
+            out[j, 9 + i] = np.sqrt(max(pdiag[i], 0.0))
+        es = _euler_std(Cc, Pa)
+        for i in range(3):
+            out[j, 15 + i] = es[i]
+        for i in range(npar):
+            out[j, 18 + i] = pnom_ep[ep, i] - x[9 + i]
+            out[j, 18 + npar + i] = np.sqrt(max(pdiag[9 + i], 0.0))

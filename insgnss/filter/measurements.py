@@ -1,0 +1,532 @@
+"""Measurement models of the error-state filter.
+
+Every model is a small object holding its epoch times; given the nominal state at one of them
+(:class:`NominalState`) it returns ``(z, H, R)`` or ``None`` (nothing to use at that epoch).
+The innovation is ``z - H x`` with ``z = h(nominal) - measured``, so that with the
+"nominal minus true" error convention of :mod:`.models` ``z = H dx + noise``.
+
+Models
+------
+- :class:`GnssPosition`: antenna position with lever arm ``l`` (body RFU, IMU to antenna):
+  ``z = r_nom + C l - r_gnss`` (ENU metres), ``H = [I, 0, -[(C l) x], 0...]``.
+- :class:`GnssVelocity`: antenna velocity ``v + C (w_ib x l) - w_il x (C l)``;
+  ``H_v = I``, ``H_phi = [w_il x][(C l) x] - [(C (w x l)) x]``, ``H_bg = C [l x]``.
+- :class:`Zupt`: zero velocity, ``z = v_nom``.
+- :class:`Zaru`: zero angular rate relative to the Earth,
+  ``z = w_ib,nom - C^T w_ie^l``, ``H_bg = -I``, ``H_phi = -C^T [w_ie x]``; observes the gyro
+  bias, the vertical one included.
+- :class:`Cupt`: known coordinates at given times (surveyed control points).
+- :class:`Heading`: magnetometer / dual-antenna heading (with a mounting offset).
+- :class:`BodyVelocity`: constraints on body (vehicle) frame velocity components at a body
+  point - non-holonomic (lateral / vertical zero), odometer forward speed with an optional
+  scale-factor state and optional IMU-to-vehicle misalignment states. This is the hook
+  used by the land-vehicle and RISS processing.
+
+GNSS quality: per-epoch ``*_std`` columns are used as the measurement sigmas; an optional
+``std_scale`` mapping ``{q: multiplier}`` inflates them by RTKLIB quality flag ``q``
+(``q`` values absent from the mapping are skipped when ``use_q`` restricts them).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+
+import numpy as np
+import pandas as pd
+
+from ..attitude import wrap_pi
+from ..earth import OMEGA_E
+from ..errors import InputFormatError, InvalidValueError
+from .models import ExtraState, StateLayout
+
+
+class NominalState:
+    """The nominal (mechanized, fed-back) state handed to measurement models at an epoch.
+
+    Attributes
+    ----------
+    time : float
+    lat, lon, height : float
+        [rad, rad, m]
+    vel : (3,) array
+        ENU velocity [m/s].
+    C : (3, 3) array
+        ``C_b^l``.
+    omega_ib, f_ib : (3,) arrays
+        Compensated angular rate [rad/s] and specific force [m/s^2] of the last IMU interval.
+    omega_ib_mean, f_ib_mean : (3,) arrays
+        Their means since the previous filter epoch.
+    segment_duration : float
+        Time since the previous filter epoch [s].
+    params : (n - 9,) array
+        Nominal parameter values (biases, scale factors, extra states), in layout order
+        from index 9.
+    layout : StateLayout
+    M, N : float
+        Meridian and prime-vertical radii at ``lat``.
+    gyro_psd : (3,) array
+        Gyro white-noise PSD of the process model (used for default ZARU sigmas).
+    """
+
+    __slots__ = ("time", "lat", "lon", "height", "vel", "C", "omega_ib", "f_ib", "omega_ib_mean",
+                 "f_ib_mean", "segment_duration", "params", "layout", "M", "N", "gyro_psd")
+
+    def param(self, name: str) -> np.ndarray:
+        """Nominal value of a parameter block (e.g. ``"gyro_bias"``, ``"odometer_scale"``)."""
+        s = self.layout[name]
+        if s.start < 9:
+            raise KeyError(f"{name!r} is a navigation block, not a parameter")
+        return self.params[s.start - 9:s.stop - 9]
+
+    def enu_offset(self, lat, lon, h) -> np.ndarray:
+        """ENU metres from the point (lat, lon, h) to the nominal position (local radii)."""
+        return np.array([
+            (self.lon - lon) * (self.N + self.height) * np.cos(self.lat),
+            (self.lat - lat) * (self.M + self.height),
+            self.height - h,
+        ])
+
+
+class Measurement:
+    """Base class of the measurement models.
+
+    Subclasses set :attr:`name` (the type used in logs and for per-type gating), provide
+    :attr:`times` and implement :meth:`evaluate`.
+
+    Parameters
+    ----------
+    times : array_like
+        Epoch times [s], same time base as the IMU.
+    gate_probability : float, optional
+        Chi-square gating probability for this measurement; ``None`` uses the filter
+        configuration, ``0`` disables gating.
+    """
+
+    name = "measurement"
+
+    def __init__(self, times, gate_probability: float | None = None, name: str | None = None):
+        self.times = np.asarray(times, dtype=float).reshape(-1)
+        if self.times.size and not np.all(np.isfinite(self.times)):
+            raise InvalidValueError(f"{type(self).__name__}: non-finite epoch times")
+        self.gate_probability = gate_probability
+        if name is not None:
+            self.name = name
+
+    def extra_states(self) -> list[ExtraState]:
+        """States this measurement needs appended to the error state (default none)."""
+        return []
+
+    def evaluate(self, i: int, nav: NominalState):
+        """``(z, H, R)`` for epoch ``i`` of :attr:`times`, or ``None``."""
+        raise NotImplementedError
+
+    def __len__(self) -> int:
+        return self.times.size
+
+    def __repr__(self) -> str:
+        return f"{type(self).__name__}(name={self.name!r}, epochs={self.times.size})"
+
+
+def skew(v) -> np.ndarray:
+    """``[v x]`` of one 3-vector (cheaper than the vectorised :func:`insgnss.attitude.skew`)."""
+    return np.array([[0.0, -v[2], v[1]], [v[2], 0.0, -v[0]], [-v[1], v[0], 0.0]])
+
+
+def _vec3(x, what) -> np.ndarray:
+    a = np.asarray(x, float)
+    if a.ndim == 0:
+        return np.full(3, float(a))
+    if a.shape != (3,):
+        raise ValueError(f"{what} must be a scalar or a 3-vector, got shape {a.shape}")
+    return a.copy()
+
+
+def _require(df: pd.DataFrame, cols, what: str):
+    missing = [c for c in cols if c not in df.columns]
+    if missing:
+        raise InputFormatError(f"{what} table lacks columns {missing}", column=missing[0],
+                               expected=list(cols), found=list(df.columns))
+
+
+def _stds(df: pd.DataFrame, cols, default, std_scale, use_q, min_std):
+    """Per-epoch sigmas (N, 3) from std columns (or ``default``), inflated by quality."""
+    n = len(df)
+    if all(c in df.columns for c in cols):
+        s = df[list(cols)].to_numpy(float)
+    else:
+        if default is None:
+            raise InputFormatError(f"no std columns {list(cols)} and no default std given",
+                                   column=cols[0])
+        s = np.broadcast_to(_vec3(default, "std"), (n, 3)).copy()
+    valid = np.ones(n, bool)
+    if "q" in df.columns and (std_scale or use_q is not None):
+        q = df["q"].to_numpy()
+        if std_scale:
+            mult = np.array([std_scale.get(int(v), 1.0) if np.isfinite(v) else np.nan for v in q])
+            s = s * mult[:, None]
+        if use_q is not None:
+            valid &= np.isin(q, list(use_q))
+    s = np.maximum(s, min_std)
+    valid &= np.all(np.isfinite(s), axis=1) & np.all(s > 0, axis=1)
+    return s, valid
+
+
+class GnssPosition(Measurement):
+    """GNSS antenna position.
+
+    Parameters
+    ----------
+    data : DataFrame
+        Indexed by time with ``lat lon height`` [rad, m] and ``east_std north_std up_std`` [m]
+        (or give ``std``); optional ``q`` for quality-based weighting.
+    lever_arm : 3-vector
+        IMU to antenna in the body frame (right-forward-up) [m].
+    std : scalar or 3-vector, optional
+        Sigmas (east, north, up) used when the table has no std columns.
+    std_scale : mapping, optional
+        ``{q: multiplier}`` applied to the sigmas by quality flag.
+    use_q : collection, optional
+        Only epochs with these ``q`` values are used.
+    min_std : float
+        Lower bound on the sigmas [m].
+    """
+
+    name = "gnss_pos"
+    STD_COLS = ("east_std", "north_std", "up_std")
+
+    def __init__(self, data: pd.DataFrame, lever_arm=(0.0, 0.0, 0.0), std=None,
+                 std_scale: Mapping | None = None, use_q=None, min_std: float = 1e-3,
+                 gate_probability: float | None = None, name: str | None = None):
+        _require(data, ("lat", "lon", "height"), "GNSS position")
+        super().__init__(np.asarray(data.index, float), gate_probability, name)
+        self.pos = data[["lat", "lon", "height"]].to_numpy(float)
+        self.std, valid = _stds(data, self.STD_COLS, std, std_scale, use_q, min_std)
+        self.valid = valid & np.all(np.isfinite(self.pos), axis=1)
+        self.lever_arm = _vec3(lever_arm, "lever_arm")
+        self._eye = np.eye(3)
+
+    def evaluate(self, i, nav):
+        if not self.valid[i]:
+            return None
+        p = self.pos[i]
+        la = nav.C @ self.lever_arm
+        z = nav.enu_offset(p[0], p[1], p[2]) + la
+        H = np.zeros((3, nav.layout.n))
+        H[:, 0:3] = self._eye
+        H[:, 6:9] = -skew(la)
+        return z, H, np.diag(self.std[i] ** 2)
+
+
+class GnssVelocity(Measurement):
+    """GNSS antenna velocity (ENU).
+
+    ``data`` holds ``vel_e vel_n vel_u`` [m/s] and ``vel_e_std vel_n_std vel_u_std`` (or give
+    ``std``); other parameters as :class:`GnssPosition`.
+    """
+
+    name = "gnss_vel"
+    STD_COLS = ("vel_e_std", "vel_n_std", "vel_u_std")
+
+    def __init__(self, data: pd.DataFrame, lever_arm=(0.0, 0.0, 0.0), std=None,
+                 std_scale: Mapping | None = None, use_q=None, min_std: float = 1e-4,
+                 gate_probability: float | None = None, name: str | None = None):
+        _require(data, ("vel_e", "vel_n", "vel_u"), "GNSS velocity")
+        super().__init__(np.asarray(data.index, float), gate_probability, name)
+        self.vel = data[["vel_e", "vel_n", "vel_u"]].to_numpy(float)
+        self.std, valid = _stds(data, self.STD_COLS, std, std_scale, use_q, min_std)
+        self.valid = valid & np.all(np.isfinite(self.vel), axis=1)
+        self.lever_arm = _vec3(lever_arm, "lever_arm")
+        self._use_arm = bool(np.any(self.lever_arm != 0.0))
+
+    def evaluate(self, i, nav):
+        if not self.valid[i]:
+            return None
+        H = np.zeros((3, nav.layout.n))
+        H[0, 3] = H[1, 4] = H[2, 5] = 1.0
+        z = nav.vel - self.vel[i]
+        if self._use_arm:
+            l = self.lever_arm
+            u = nav.C @ np.cross(nav.omega_ib, l)
+            cl = nav.C @ l
+            w_il = np.array([
+                -nav.vel[1] / (nav.M + nav.height),
+                OMEGA_E * np.cos(nav.lat) + nav.vel[0] / (nav.N + nav.height),
+                OMEGA_E * np.sin(nav.lat) + nav.vel[0] * np.tan(nav.lat) / (nav.N + nav.height),
+            ])
+            z = z + u - np.cross(w_il, cl)
+            H[:, 6:9] = skew(w_il) @ skew(cl) - skew(u)
+            H[:, 9:12] = nav.C @ skew(l)
+        return z, H, np.diag(self.std[i] ** 2)
+
+
+class Zupt(Measurement):
+    """Zero-velocity update at the given times (the IMU is at rest).
+
+    Parameters
+    ----------
+    times : array_like
+    std : float or 3-vector
+        Sigma of the zero-velocity pseudo-measurement [m/s].
+    """
+
+    name = "zupt"
+
+    def __init__(self, times, std=0.01, gate_probability: float | None = None,
+                 name: str | None = None):
+        super().__init__(times, gate_probability, name)
+        self.R = np.diag(_vec3(std, "std") ** 2)
+
+    def evaluate(self, i, nav):
+        H = np.zeros((3, nav.layout.n))
+        H[0, 3] = H[1, 4] = H[2, 5] = 1.0
+        return nav.vel.copy(), H, self.R
+
+
+class Zaru(Measurement):
+    """Zero angular-rate update: at rest the body turns only with the Earth.
+
+    ``z = w_ib - C^T w_ie^l`` with ``w_ib`` the bias-compensated gyro rate, averaged since the
+    previous filter epoch (``average=True``) or of the last IMU interval.
+
+    Parameters
+    ----------
+    times : array_like
+    std : float or 3-vector, optional
+        Sigma [rad/s]. Default: the gyro white noise averaged over the window,
+        ``sqrt(psd / window)``, floored at ``min_std``.
+    """
+
+    name = "zaru"
+
+    def __init__(self, times, std=None, average: bool = True, min_std: float = 1e-7,
+                 gate_probability: float | None = None, name: str | None = None):
+        super().__init__(times, gate_probability, name)
+        self.std = None if std is None else _vec3(std, "std")
+        self.average = bool(average)
+        self.min_std = float(min_std)
+
+    def evaluate(self, i, nav):
+        w = nav.omega_ib_mean if self.average else nav.omega_ib
+        w_ie = np.array([0.0, OMEGA_E * np.cos(nav.lat), OMEGA_E * np.sin(nav.lat)])
+        z = w - nav.C.T @ w_ie
+        H = np.zeros((3, nav.layout.n))
+        H[0, 9] = H[1, 10] = H[2, 11] = -1.0
+        H[:, 6:9] = -nav.C.T @ skew(w_ie)
+        if self.std is not None:
+            s = self.std
+        else:
+            window = nav.segment_duration if self.average else 0.0
+            if window <= 0.0:
+                return None
+            s = np.sqrt(nav.gyro_psd / window)
+        s = np.maximum(s, self.min_std)
+        return z, H, np.diag(s**2)
+
+
+class Cupt(Measurement):
+    """Coordinate update at control points: the IMU (or a body point) is at known coordinates.
+
+    Parameters
+    ----------
+    times : array_like
+        When the vehicle is at each control point.
+    lat, lon, height : array_like
+        Coordinates [rad, m] (one per time).
+    std : scalar, 3-vector or (N, 3)
+        Sigma of the control-point coordinates (east, north, up) [m].
+    lever_arm : 3-vector
+        IMU to the point that sits on the control point (body RFU) [m].
+    """
+
+    name = "cupt"
+
+    def __init__(self, times, lat, lon, height, std=0.01, lever_arm=(0.0, 0.0, 0.0),
+                 gate_probability: float | None = None, name: str | None = None):
+        super().__init__(times, gate_probability, name)
+        n = self.times.size
+        self.pos = np.column_stack([np.broadcast_to(np.asarray(v, float), (n,))
+                                    for v in (lat, lon, height)])
+        s = np.asarray(std, float)
+        self.std = np.broadcast_to(s if s.ndim != 1 or s.size == 3 else s[:, None], (n, 3)).copy()
+        self.lever_arm = _vec3(lever_arm, "lever_arm")
+
+    @classmethod
+    def from_table(cls, data: pd.DataFrame, **kw) -> Cupt:
+        """From a table indexed by time with ``lat lon height`` and optional std columns."""
+        _require(data, ("lat", "lon", "height"), "control point")
+        std = kw.pop("std", 0.01)
+        if all(c in data.columns for c in GnssPosition.STD_COLS):
+            std = data[list(GnssPosition.STD_COLS)].to_numpy(float)
+        return cls(data.index, data["lat"], data["lon"], data["height"], std=std, **kw)
+
+    def evaluate(self, i, nav):
+        p = self.pos[i]
+        la = nav.C @ self.lever_arm
+        z = nav.enu_offset(p[0], p[1], p[2]) + la
+        H = np.zeros((3, nav.layout.n))
+        H[0, 0] = H[1, 1] = H[2, 2] = 1.0
+        H[:, 6:9] = -skew(la)
+        return z, H, np.diag(self.std[i] ** 2)
+
+
+class Heading(Measurement):
+    """Heading measurement (magnetometer or dual-antenna GNSS).
+
+    ``z = wrap(A_nom + offset - A_measured)`` with ``H_phi = [C01 C21, C11 C21,
+    -(C01^2 + C11^2)] / (C01^2 + C11^2)`` (derivative of ``atan2(C01, C11)`` under
+    ``C_nom = (I + [phi x]) C``).
+
+    Parameters
+    ----------
+    times, heading : array_like
+        Heading [rad], clockwise from north.
+    std : float or array_like
+        Sigma [rad].
+    offset : float
+        Heading of the sensor's reference direction minus the body heading [rad] (e.g.
+        the dual-antenna baseline azimuth in the body frame, or magnetic declination
+        with the opposite sign for a magnetometer).
+    """
+
+    name = "heading"
+
+    def __init__(self, times, heading, std, offset: float = 0.0,
+                 gate_probability: float | None = None, name: str | None = None):
+        super().__init__(times, gate_probability, name)
+        n = self.times.size
+        self.heading = np.broadcast_to(np.asarray(heading, float), (n,)).copy()
+        self.std = np.broadcast_to(np.asarray(std, float), (n,)).copy()
+        self.offset = float(offset)
+
+    @classmethod
+    def from_table(cls, data: pd.DataFrame, std=None, **kw) -> Heading:
+        """From a table with ``heading`` [rad] and ``heading_std`` (or ``std``)."""
+        _require(data, ("heading",), "heading")
+        if "heading_std" in data.columns:
+            std = data["heading_std"].to_numpy(float)
+        if std is None:
+            raise InputFormatError("heading table lacks 'heading_std' and no std was given",
+                                   column="heading_std")
+        return cls(data.index, data["heading"], std, **kw)
+
+    def evaluate(self, i, nav):
+        m = self.heading[i]
+        if not np.isfinite(m):
+            return None
+        C = nav.C
+        a = np.arctan2(C[0, 1], C[1, 1])
+        h2 = C[0, 1] ** 2 + C[1, 1] ** 2
+        if h2 < 1e-6:  # heading undefined near +-90 deg pitch
+            return None
+        H = np.zeros((1, nav.layout.n))
+        H[0, 6] = C[0, 1] * C[2, 1] / h2
+        H[0, 7] = C[1, 1] * C[2, 1] / h2
+        H[0, 8] = -1.0
+        z = np.array([float(wrap_pi(a + self.offset - m))])
+        return z, H, np.array([[self.std[i] ** 2]])
+
+
+class BodyVelocity(Measurement):
+    """Constraints on components of the vehicle-frame velocity of a body point.
+
+    Predicted measurement per constrained axis ``k`` (0 right, 1 forward, 2 up)::
+
+        v_b = C^T v + w_ib x l                (velocity of the point, body frame)
+        v_v = (I - [mu x]) v_b                (vehicle frame; mu = IMU-to-vehicle misalignment)
+        h_k = (1 + s) v_v[k]  if k is the scaled axis, else v_v[k]
+
+    and ``z = h - measured``. Typical uses:
+
+    - non-holonomic constraint: ``axes=(0, 2)``, ``values=0``, sigmas ~0.05-0.2 m/s;
+    - odometer: ``axes=(1,)``, ``values=speed``, ``scale_state="odometer_scale"``.
+
+    Parameters
+    ----------
+    times : array_like
+    values : scalar, (N,) or (N, len(axes))
+        Measured velocity components [m/s]; a 1-D array holds one value per epoch.
+    axes : sequence of int
+    std : scalar, sequence per axis, (N,) per epoch or (N, len(axes)) array [m/s]
+    lever_arm : 3-vector
+        IMU to the constrained point (e.g. rear axle centre, wheel) [m].
+    scale_state : str, optional
+        Name of a scale-factor state (appended) applied to ``scale_axis``.
+    scale_axis : int
+    scale_std, scale_psd : float
+        Initial sigma and random-walk PSD of the scale-factor state.
+    misalignment_state : str, optional
+        Name of a 3-element IMU-to-vehicle misalignment state (random constant).
+    misalignment_std : float
+        Initial sigma of the misalignment [rad].
+    """
+
+    name = "body_velocity"
+
+    def __init__(self, times, values=0.0, axes: Sequence[int] = (0, 2), std=0.1,
+                 lever_arm=(0.0, 0.0, 0.0), scale_state: str | None = None, scale_axis: int = 1,
+                 scale_std: float = 0.01, scale_psd: float = 0.0,
+                 misalignment_state: str | None = None, misalignment_std: float = 0.02,
+                 gate_probability: float | None = None, name: str | None = None):
+        super().__init__(times, gate_probability, name)
+        n = self.times.size
+        self.axes = np.asarray(axes, int).reshape(-1)
+        k = self.axes.size
+        if k == 0 or np.any((self.axes < 0) | (self.axes > 2)):
+            raise ValueError("axes must be a non-empty subset of (0, 1, 2)")
+        v = np.asarray(values, float)
+        if v.ndim == 1 and v.size == n:  # one value per epoch
+            v = v[:, None]
+        self.values = np.broadcast_to(v, (n, k)).copy()
+        s = np.asarray(std, float)
+        if s.ndim == 1 and s.size == n and s.size != k:  # one sigma per epoch
+            s = s[:, None]
+        self.std = np.broadcast_to(s, (n, k)).copy()
+        self.lever_arm = _vec3(lever_arm, "lever_arm")
+        self.scale_state = scale_state
+        self.scale_axis = int(scale_axis)
+        self.scale_std = float(scale_std)
+        self.scale_psd = float(scale_psd)
+        self.misalignment_state = misalignment_state
+        self.misalignment_std = float(misalignment_std)
+
+    def extra_states(self):
+        out = []
+        if self.scale_state:
+            out.append(ExtraState(self.scale_state, 1, self.scale_std, np.inf, self.scale_psd))
+        if self.misalignment_state:
+            out.append(ExtraState(self.misalignment_state, 3, self.misalignment_std,
+                                  labels=(f"{self.misalignment_state}_x",
+                                          f"{self.misalignment_state}_y",
+                                          f"{self.misalignment_state}_z")))
+        return out
+
+    def evaluate(self, i, nav):
+        meas = self.values[i]
+        if not np.all(np.isfinite(meas)):
+            return None
+        layout: StateLayout = nav.layout
+        CT = nav.C.T
+        l = self.lever_arm
+        vb = CT @ nav.vel + np.cross(nav.omega_ib, l)
+        J = np.zeros((3, layout.n))  # d v_b / d x
+        J[:, 3:6] = CT
+        J[:, 6:9] = CT @ skew(nav.vel)
+        J[:, 9:12] = skew(l)
+        if self.misalignment_state:
+            mu = nav.param(self.misalignment_state)
+            Rm = np.eye(3) - skew(mu)
+            vv = Rm @ vb
+            J = Rm @ J
+            J[:, layout[self.misalignment_state]] = skew(vb)
+        else:
+            vv = vb
+        h = vv[self.axes].copy()
+        H = J[self.axes].copy()
+        if self.scale_state:
+            s = float(nav.param(self.scale_state)[0])
+            rows = np.nonzero(self.axes == self.scale_axis)[0]
+            for r in rows:
+                H[r] *= 1.0 + s
+                H[r, layout[self.scale_state]] = vv[self.scale_axis]
+                h[r] *= 1.0 + s
+        return h - meas, H, np.diag(self.std[i] ** 2)

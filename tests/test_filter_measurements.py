@@ -1,0 +1,311 @@
+"""Measurement models: H against numerical derivatives of h(nominal), and scenarios for ZUPT,
+ZARU, CUPT, heading, odometer/NHC and lever arms."""
+
+from __future__ import annotations
+
+import numpy as np
+import pandas as pd
+import pytest
+from filter_sim import (
+    DEG,
+    car_truth,
+    corrupt_imu,
+    gnss_from_truth,
+    initial_with_error,
+    nav_errors,
+    perturbed_initial,
+    static_truth,
+    true_body_rates,
+)
+
+from insgnss.attitude import euler_to_dcm, rotvec_to_dcm
+from insgnss.earth import radii
+from insgnss.errors import InputFormatError
+from insgnss.filter import (
+    BodyVelocity,
+    Cupt,
+    FilterConfig,
+    GnssPosition,
+    GnssVelocity,
+    Heading,
+    NominalState,
+    StateLayout,
+    Zaru,
+    Zupt,
+    run_filter,
+)
+from insgnss.imu import grade
+
+
+def _nav(layout, lat=0.8, lon=0.2, h=120.0, vel=(3.0, -8.0, 0.4), rpy=(0.1, -0.2, 2.0),
+         omega=(0.02, -0.05, 0.3), params=None):
+    nav = NominalState()
+    nav.layout = layout
+    nav.time = 10.0
+    nav.lat, nav.lon, nav.height = lat, lon, h
+    nav.vel = np.array(vel, float)
+    nav.C = euler_to_dcm(*rpy)
+    nav.omega_ib = np.array(omega, float)
+    nav.omega_ib_mean = nav.omega_ib.copy()
+    nav.f_ib = np.array([0.1, 0.2, 9.8])
+    nav.f_ib_mean = nav.f_ib.copy()
+    nav.segment_duration = 0.5
+    nav.params = np.zeros(layout.n - 9) if params is None else np.array(params, float)
+    nav.M, nav.N = radii(lat)
+    nav.gyro_psd = np.full(3, 1e-8)
+    return nav
+
+
+def _perturbed(nav, d):
+    """The nominal moved by the error-state vector d (nominal minus true convention)."""
+    out = _nav(nav.layout, params=nav.params + d[9:])
+    M, N = radii(nav.lat)
+    out.lat = nav.lat + d[1] / (M + nav.height)
+    out.lon = nav.lon + d[0] / ((N + nav.height) * np.cos(nav.lat))
+    out.height = nav.height + d[2]
+    out.M, out.N = radii(out.lat)
+    out.vel = nav.vel + d[3:6]
+    out.C = rotvec_to_dcm(d[6:9]) @ nav.C
+    # a larger gyro-bias estimate means a smaller compensated rate
+    out.omega_ib = nav.omega_ib - d[9:12]
+    out.omega_ib_mean = nav.omega_ib_mean - d[9:12]
+    out.segment_duration = nav.segment_duration
+    return out
+
+
+def _check_jacobian(meas, nav, i=0, eps=None):
+    z0, H, R = meas.evaluate(i, nav)
+    n = nav.layout.n
+    if eps is None:  # large enough for float64 lat/lon, small enough for the curvature
+        eps = np.full(n, 1e-6)
+        eps[0:3] = 1e-2
+        eps[3:6] = 1e-4
+    num = np.zeros_like(H)
+    for k in range(n):
+        d = np.zeros(n)
+        d[k] = eps[k]
+        zp = meas.evaluate(i, _perturbed(nav, d))[0]
+        zm = meas.evaluate(i, _perturbed(nav, -d))[0]
+        num[:, k] = (zp - zm) / (2 * eps[k])
+    bad = ~np.isclose(H, num, atol=1e-6, rtol=1e-5)
+    assert not bad.any(), (np.argwhere(bad), H[bad], num[bad])
+    assert R.shape == (z0.size, z0.size) and np.all(np.linalg.eigvalsh(R) > 0)
+    return z0, H
+
+
+def _gnss_table(nav, lever=(0, 0, 0)):
+    return pd.DataFrame({"lat": [nav.lat + 1e-7], "lon": [nav.lon - 2e-7], "height": [nav.height + 0.7],
+                         "east_std": [0.5], "north_std": [0.6], "up_std": [1.0],
+                         "vel_e": [3.1], "vel_n": [-7.9], "vel_u": [0.3],
+                         "vel_e_std": [0.05], "vel_n_std": [0.05], "vel_u_std": [0.1]},
+                        index=pd.Index([10.0], name="time"))
+
+
+def test_gnss_position_jacobian_and_value():
+    lay = StateLayout()
+    nav = _nav(lay)
+    g = _gnss_table(nav)
+    m = GnssPosition(g, lever_arm=(0.3, 1.2, 0.8))
+    z, H = _check_jacobian(m, nav)
+    la = nav.C @ np.array([0.3, 1.2, 0.8])
+    M, N = radii(nav.lat)
+    expect = np.array([2e-7 * (N + nav.height) * np.cos(nav.lat), -1e-7 * (M + nav.height), -0.7]) + la
+    assert np.allclose(z, expect, atol=1e-6)
+
+
+def test_gnss_velocity_jacobian_with_lever_arm():
+    lay = StateLayout()
+    nav = _nav(lay)
+    m = GnssVelocity(_gnss_table(nav), lever_arm=(0.3, 1.2, 0.8))
+    _, H = _check_jacobian(m, nav)
+    assert np.any(H[:, 9:12] != 0) and np.any(H[:, 6:9] != 0)
+
+
+def test_zupt_zaru_cupt_heading_jacobians():
+    lay = StateLayout(True)
+    nav = _nav(lay)
+    _check_jacobian(Zupt([10.0], std=0.01), nav)
+    zaru_nav = _nav(lay, vel=(0, 0, 0), omega=(1e-5, 3e-5, 4e-5))
+    z, H = _check_jacobian(Zaru([10.0], std=1e-4), zaru_nav)
+    assert np.allclose(H[:, 9:12], -np.eye(3))
+    _check_jacobian(Cupt([10.0], nav.lat, nav.lon, nav.height, std=0.05, lever_arm=(0, 0.5, -1)), nav)
+    z, H = _check_jacobian(Heading([10.0], [2.01], std=0.01), nav)
+    assert z[0] == pytest.approx(-0.01, abs=1e-9)
+    # heading wraps across north
+    zw = Heading([10.0], [2 * np.pi - 0.01], std=0.01).evaluate(0, _nav(lay, rpy=(0, 0, 0.02)))[0]
+    assert zw[0] == pytest.approx(0.03, abs=1e-9)
+
+
+def test_body_velocity_jacobian_with_scale_and_misalignment():
+    m = BodyVelocity([10.0], values=[[0.05, 8.2, -0.02]], axes=(0, 1, 2), std=0.1,
+                     lever_arm=(0.2, -1.5, -0.4), scale_state="odo_scale", scale_axis=1,
+                     misalignment_state="mis")
+    lay = StateLayout(False, m.extra_states())
+    assert lay.n == 19
+    nav = _nav(lay, params=np.r_[np.zeros(6), 0.02, 0.01, -0.005, 0.03])
+    _, H = _check_jacobian(m, nav)
+    assert H[1, lay["odo_scale"]][0] != 0 and np.any(H[:, lay["mis"]] != 0)
+    nhc = BodyVelocity(np.arange(3.0), values=0.0, axes=(0, 2), std=[0.1, 0.2])
+    assert nhc.values.shape == (3, 2) and np.allclose(nhc.std[:, 1], 0.2)
+
+
+def test_gnss_quality_weighting_and_missing_columns():
+    idx = pd.Index([0.0, 1.0, 2.0], name="time")
+    g = pd.DataFrame({"lat": 0.8, "lon": 0.1, "height": 10.0, "east_std": 0.02, "north_std": 0.02,
+                      "up_std": 0.04, "q": [1, 2, 5]}, index=idx)
+    m = GnssPosition(g, std_scale={1: 1.0, 2: 5.0, 5: 50.0}, min_std=0.05)
+    assert np.allclose(m.std[:, 0], [0.05, 0.1, 1.0])
+    m2 = GnssPosition(g, use_q=[1, 2])
+    assert list(m2.valid) == [True, True, False]
+    assert m2.evaluate(2, _nav(StateLayout())) is None
+    with pytest.raises(InputFormatError):
+        GnssPosition(g.drop(columns=["east_std"]))
+    assert GnssPosition(g.drop(columns=["east_std", "north_std", "up_std"]), std=2.0).std[0, 2] == 2.0
+    with pytest.raises(InputFormatError):
+        GnssVelocity(g)
+
+
+# --- scenarios ----------------------------------------------------------------------------------
+def _stop_indices(truth, stops, guard=0.5):
+    t = truth.index.to_numpy()
+    m = np.zeros(t.size, bool)
+    for a, b in stops:
+        m |= (t >= a + guard) & (t <= b)
+    return m
+
+
+def test_zupt_bounds_velocity_error_at_stops_mems():
+    stops = [(70.0, 90.0), (150.0, 175.0)]
+    truth = car_truth(200.0, 100.0, stops=stops)
+    model = grade("mems")
+    rng = np.random.default_rng(11)
+    imu, _ = corrupt_imu(truth, model, rng)
+    gnss = gnss_from_truth(truth, 100, rng, pos_std=(1.5, 1.5, 3.0))
+    init, _ = perturbed_initial(truth, rng, 1.0, 0.1, (0.01, 0.01, 0.05))
+    t = truth.index.to_numpy()
+    in_stop = _stop_indices(truth, stops, guard=0.0)
+    zupt = Zupt(t[in_stop][::10], std=0.005)  # 10 Hz during the stops
+    cfg = FilterConfig(imu_model=model, initial_att_std=(0.01, 0.01, 0.05))
+    res = run_filter(imu, init, [GnssPosition(gnss), zupt], cfg)
+    err = nav_errors(res.forward, truth)
+    vel_err = np.linalg.norm(err[["vel_e", "vel_n", "vel_u"]].to_numpy(), axis=1)
+    stop = _stop_indices(truth, stops, guard=0.5)
+    assert vel_err[stop].max() < 0.01
+    # without ZUPT the velocity error in the stops is much larger
+    res0 = run_filter(imu, init, [GnssPosition(gnss)], cfg)
+    err0 = nav_errors(res0.forward, truth)
+    v0 = np.linalg.norm(err0[["vel_e", "vel_n", "vel_u"]].to_numpy(), axis=1)
+    assert v0[stop].max() > 3 * vel_err[stop].max()
+
+
+def test_zaru_estimates_vertical_gyro_bias_mems():
+    truth = static_truth(60.0, 100.0, heading=1.0)
+    model = grade("mems")
+    rng = np.random.default_rng(5)
+    bias0 = np.r_[0.05, -0.08, 0.1, 0.1, -0.1, 0.15] * np.r_[DEG, DEG, DEG, 1, 1, 1]
+    imu, errs = corrupt_imu(truth, model, rng, bias="constant", bias0=bias0)
+    init = initial_with_error(truth, np.r_[0, 0, 0, 0, 0, 0, 0.002, -0.002, 0.02])
+    t = truth.index.to_numpy()
+    ms = [Zupt(t[10::10], std=0.005), Zaru(t[10::10])]
+    res = run_filter(imu, init, ms, FilterConfig(imu_model=model, initial_att_std=(0.01, 0.01, 0.05)))
+    bz_true = errs["gyro_bias"][-1, 2]
+    bz_est = res.forward["gyro_bias_z"].iloc[-1]
+    assert abs(bz_est - bz_true) < 0.2 * abs(bz_true)
+    # the horizontal gyro biases too, and much better than 20 %
+    assert np.allclose(res.forward[["gyro_bias_x", "gyro_bias_y"]].iloc[-1], errs["gyro_bias"][-1, :2],
+                       rtol=0.05)
+    # ZUPT alone cannot see the vertical gyro bias
+    res0 = run_filter(imu, init, ms[:1], FilterConfig(imu_model=model, initial_att_std=(0.01, 0.01, 0.05)))
+    assert abs(res0.forward["gyro_bias_z"].iloc[-1] - bz_true) > 0.5 * abs(bz_true)
+
+
+def test_cupt_removes_accumulated_error():
+    stops = [(250.0, 270.0)]
+    truth = car_truth(280.0, 50.0, stops=stops)
+    model = grade("tactical")
+    rng = np.random.default_rng(21)
+    imu, _ = corrupt_imu(truth, model, rng)
+    gnss = gnss_from_truth(truth, 50, rng)
+    gnss = gnss[gnss.index < 100.0]  # GNSS lost after 100 s
+    init, _ = perturbed_initial(truth, rng, 1.0, 0.1, (0.005, 0.005, 0.02))
+    t_cp = 260.0
+    cp = truth.loc[t_cp]
+    sigma = 0.05
+    cupt = Cupt([t_cp], cp["lat"], cp["lon"], cp["height"], std=sigma)
+    t = truth.index.to_numpy()
+    zupt = Zupt(t[(t >= 250.5) & (t <= 270)][::5], std=0.005)
+    cfg = FilterConfig(imu_model=model, initial_att_std=(0.005, 0.005, 0.02))
+    before = nav_errors(run_filter(imu, init, [GnssPosition(gnss), zupt], cfg).forward, truth)
+    res = run_filter(imu, init, [GnssPosition(gnss), zupt, cupt], cfg)
+    err = nav_errors(res.forward, truth)
+    e_before = np.hypot(before.loc[t_cp, "east"], before.loc[t_cp, "north"])
+    assert e_before > 20 * sigma  # the coast accumulated a real error
+    assert np.all(np.abs(err.loc[t_cp, ["east", "north", "up"]].to_numpy()) < sigma)
+    assert np.all(res.forward.loc[t_cp, ["east_std", "north_std", "up_std"]] <= sigma)
+
+
+def test_heading_measurement_aligns_static_heading():
+    truth = static_truth(60.0, 100.0, heading=0.3)
+    model = grade("tactical")
+    rng = np.random.default_rng(8)
+    imu, _ = corrupt_imu(truth, model, rng)
+    init = initial_with_error(truth, np.r_[0, 0, 0, 0, 0, 0, 0, 0, 5 * DEG])
+    t = truth.index.to_numpy()
+    meas_t = t[100::100]
+    sig = 0.5 * DEG
+    hd = Heading(meas_t, 0.3 + rng.standard_normal(meas_t.size) * sig, std=sig)
+    cfg = FilterConfig(imu_model=model, initial_att_std=(0.002, 0.002, 10 * DEG))
+    res = run_filter(imu, init, [Zupt(meas_t, std=0.01), hd], cfg)
+    err = nav_errors(res.forward, truth)
+    assert abs(err["heading"].iloc[-1]) < 3 * res.forward["heading_std"].iloc[-1]
+    assert res.forward["heading_std"].iloc[-1] < sig / np.sqrt(30)
+
+
+def test_odometer_scale_and_nhc_estimated():
+    truth = car_truth(300.0, 50.0)
+    model = grade("tactical")
+    rng = np.random.default_rng(4)
+    imu, _ = corrupt_imu(truth, model, rng)
+    gnss = gnss_from_truth(truth, 50, rng)
+    init, _ = perturbed_initial(truth, rng, 1.0, 0.1, (0.005, 0.005, 0.02))
+    C = euler_to_dcm(truth["roll"].to_numpy(), truth["pitch"].to_numpy(), truth["heading"].to_numpy())
+    vb = np.einsum("kji,kj->ki", C, truth[["vel_e", "vel_n", "vel_u"]].to_numpy())
+    t = truth.index.to_numpy()
+    rows = np.arange(0, t.size, 5)  # 10 Hz
+    k_true = 0.03
+    speed = (1 + k_true) * vb[rows, 1] + rng.standard_normal(rows.size) * 0.02
+    odo = BodyVelocity(t[rows], speed, axes=(1,), std=0.02, scale_state="odometer_scale",
+                       scale_std=0.05, name="odometer")
+    nhc = BodyVelocity(t[rows], 0.0, axes=(0, 2), std=0.05, name="nhc")
+    cfg = FilterConfig(imu_model=model, initial_att_std=(0.005, 0.005, 0.02))
+    res = run_filter(imu, init, [GnssPosition(gnss), GnssVelocity(gnss), odo, nhc], cfg)
+    k_est = res.forward["odometer_scale"].iloc[-1]
+    k_std = res.forward["odometer_scale_std"].iloc[-1]
+    assert abs(k_est - k_true) < max(3 * k_std, 1e-3) and k_std < 2e-3
+    assert set(res.innovations["type"]) == {"gnss_pos", "gnss_vel", "odometer", "nhc"}
+
+
+def test_lever_arm_is_needed_and_used():
+    truth = car_truth(200.0, 50.0, turn_rate=0.15)
+    model = grade("tactical")
+    rng = np.random.default_rng(9)
+    imu, _ = corrupt_imu(truth, model, rng)
+    arm = np.array([0.6, 1.8, 1.2])
+    gnss = gnss_from_truth(truth, 50, rng, pos_std=(0.05, 0.05, 0.1), vel_std=(0.01, 0.01, 0.02),
+                           lever_arm=arm, omega_b=true_body_rates(truth))
+    init, _ = perturbed_initial(truth, rng, 0.05, 0.01, (0.005, 0.005, 0.02))
+    cfg = FilterConfig(imu_model=model, initial_pos_std=0.1, initial_vel_std=0.05,
+                       initial_att_std=(0.005, 0.005, 0.02), gate_probability=None)
+    good = run_filter(imu, init, [GnssPosition(gnss, lever_arm=arm), GnssVelocity(gnss, lever_arm=arm)], cfg)
+    bad = run_filter(imu, init, [GnssPosition(gnss), GnssVelocity(gnss)], cfg)
+    nis_good = good.innovations.groupby("type")["nis"].mean()
+    nis_bad = bad.innovations.groupby("type")["nis"].mean()
+    assert nis_good["gnss_pos"] < 4.5 and nis_good["gnss_vel"] < 4.5
+    assert nis_bad["gnss_pos"] > 3 * nis_good["gnss_pos"]
+    assert nis_bad["gnss_vel"] > 3 * nis_good["gnss_vel"]
+    eg = nav_errors(good.forward, truth)
+    eb = nav_errors(bad.forward, truth)
+    rms_good = np.sqrt(np.mean(eg["east"] ** 2 + eg["north"] ** 2))
+    rms_bad = np.sqrt(np.mean(eb["east"] ** 2 + eb["north"] ** 2))
+    print(nis_good.to_dict(), nis_bad.to_dict(), rms_good, rms_bad)
+    assert rms_good < 0.1 and rms_bad > 10 * rms_good
