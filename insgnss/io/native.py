@@ -73,11 +73,32 @@ def from_file_columns(df: pd.DataFrame) -> pd.DataFrame:
     return out
 
 
-def write_table(df: pd.DataFrame, path: str | os.PathLike, float_format: str = "%.12g") -> Path:
+def csv_writer(out: pd.DataFrame) -> Callable[[Path], None]:
+    """A function writing ``out`` (index first, as ``time``) to a CSV path.
+
+    Uses pyarrow's C++ CSV writer (shortest round-trip floats, NaN as ``nan``; ~20x faster
+    than pandas for IMU-rate tables) and falls back to pandas with 15 significant digits.
+    """
+    try:
+        import pyarrow as pa
+        import pyarrow.csv as pacsv
+    except ImportError:  # pragma: no cover - pyarrow is a dependency
+        return lambda p: out.to_csv(p, float_format="%.15g", na_rep="nan")
+    cols = {str(out.index.name or "time"): pa.array(np.asarray(out.index, float))}
+    for c in out.columns:
+        v = out[c].to_numpy()
+        cols[str(c)] = pa.array(v, from_pandas=False) if v.dtype.kind == "f" else \
+            pa.array(v.astype(str) if v.dtype.kind == "O" else v)
+    table = pa.table(cols)
+    opts = pacsv.WriteOptions(quoting_style="none", quoting_header="none")
+    return lambda p: pacsv.write_csv(table, str(p), write_options=opts)
+
+
+def write_table(df: pd.DataFrame, path: str | os.PathLike) -> Path:
     """Write a time-indexed DataFrame as a native insgnss CSV (atomically)."""
     out = to_file_columns(df)
     out.index = pd.Index(np.asarray(df.index, float), name="time")
-    return atomic_write(path, lambda p: out.to_csv(p, float_format=float_format))
+    return atomic_write(path, csv_writer(out))
 
 
 def read_table(path: str | os.PathLike, required: list[str] | None = None) -> pd.DataFrame:

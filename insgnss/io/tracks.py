@@ -41,7 +41,7 @@ from ..validate import (
     split_lines,
 )
 from .gpstime import to_gps_seconds
-from .native import atomic_write, from_file_columns, to_file_columns
+from .native import atomic_write, csv_writer, from_file_columns, to_file_columns
 
 KML_NS = "http://www.opengis.net/kml/2.2"
 ALTITUDE_MODES = ("clampToGround", "relativeToGround", "absolute")
@@ -72,11 +72,14 @@ def _llh_deg(df: pd.DataFrame, name: str) -> np.ndarray:
 
 def write_trajectory_csv(df: pd.DataFrame, path: str | os.PathLike, *,
                          protect: Sequence[str | os.PathLike] = (),
-                         float_format: str = "%.15g") -> Path:
-    """Write a time-indexed table as a native insgnss CSV (atomically)."""
+                         float_format: str | None = None) -> Path:
+    """Write a time-indexed table as a native insgnss CSV (atomically); ``float_format=None``
+    writes shortest round-trip floats with the fast writer (:func:`~.native.csv_writer`)."""
     ensure_not_input(path, [*protect, df.attrs.get("source")])
     out = to_file_columns(df)
     out.index = pd.Index(np.asarray(df.index, float), name="time")
+    if float_format is None:
+        return atomic_write(path, csv_writer(out))
     return atomic_write(path, lambda p: out.to_csv(p, float_format=float_format, na_rep="nan"))
 
 
@@ -141,7 +144,8 @@ def write_eval_csv(df: pd.DataFrame, path: str | os.PathLike, *, week: int | Non
         r, p, y = euler_to_ned(df["roll"].to_numpy(float), df["pitch"].to_numpy(float),
                                df["heading"].to_numpy(float))
         out["roll_deg"], out["pitch_deg"], out["yaw_deg"] = np.degrees(r), np.degrees(p), np.degrees(y)
-    return atomic_write(path, lambda p: out.to_csv(p, index=False, float_format="%.10f"))
+    out = out.set_index("time_gpst_s")  # the fast writer puts the index first
+    return atomic_write(path, csv_writer(out))
 
 
 def _sources(tracks: dict, points) -> list:
