@@ -1,0 +1,224 @@
+"""Stillness detectors: statistics against closed forms, decision logic, simulated gait."""
+
+from __future__ import annotations
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from insgnss.detect import (
+    DetectorConfig,
+    amv_statistic,
+    are_statistic,
+    detect_arrays,
+    detect_stillness,
+    drop_short_runs,
+    fill_short_runs,
+    gait_adaptive_threshold,
+    hysteresis_decision,
+    mag_statistic,
+    quiet_runs,
+    running_max,
+    running_min,
+    shoe_statistic,
+)
+from insgnss.errors import ConfigError
+from insgnss.imu import increments_table, rates_table, trapezoid_increments
+
+G = 9.81
+D = np.pi / 180.0
+
+
+def _brute(x, half, fn):
+    n = x.size
+    return np.array([fn(x[max(0, k - half):min(n, k + half + 1)]) for k in range(n)])
+
+
+# --- statistics ------------------------------------------------------------------------------
+def test_statistics_closed_form_constant_input():
+    n = 50
+    w = np.tile([0.1, -0.2, 0.05], (n, 1))
+    a = np.tile([0.3, -0.4, 9.7], (n, 1))
+    sa, sw = 0.02, 0.003
+    # constant specific force: a_j - g abar/|abar| = (1 - g/|a|) a
+    na = np.linalg.norm(a[0])
+    expect = (na - G) ** 2 / sa**2 + np.sum(w[0] ** 2) / sw**2
+    np.testing.assert_allclose(shoe_statistic(a, w, 7, sa, sw, G), expect, rtol=1e-12)
+    np.testing.assert_allclose(are_statistic(w, 7), np.linalg.norm(w[0]), rtol=1e-12)
+    np.testing.assert_allclose(amv_statistic(a, 7), 0.0, atol=1e-12)
+    np.testing.assert_allclose(mag_statistic(a, 7, G), abs(na - G), rtol=1e-12)
+
+
+def test_statistics_against_brute_force_windows():
+    rng = np.random.default_rng(3)
+    a = rng.normal([0, 0, G], 0.5, (40, 3))
+    w = rng.normal(0, 0.3, (40, 3))
+    W = 5  # centred: k-2 .. k+2, truncated at the ends
+    sa, sw = 0.1, 0.05
+
+    def shoe(k):
+        lo, hi = max(0, k - 2), min(40, k + 3)
+        aa, ww = a[lo:hi], w[lo:hi]
+        u = aa.mean(0) / np.linalg.norm(aa.mean(0))
+        return np.mean(np.sum((aa - G * u) ** 2, 1) / sa**2 + np.sum(ww**2, 1) / sw**2)
+
+    def amv(k):
+        aa = a[max(0, k - 2):min(40, k + 3)]
+        return np.sqrt(np.mean(np.sum((aa - aa.mean(0)) ** 2, 1)))
+
+    np.testing.assert_allclose(shoe_statistic(a, w, W, sa, sw, G), [shoe(k) for k in range(40)],
+                               rtol=1e-12)
+    np.testing.assert_allclose(amv_statistic(a, W), [amv(k) for k in range(40)], rtol=1e-12)
+    mags = np.linalg.norm(a, axis=1)
+    np.testing.assert_allclose(mag_statistic(a, W, G),
+                               _brute(mags, 2, lambda v: np.sqrt(np.mean((v - G) ** 2))),
+                               rtol=1e-12)
+
+
+def test_running_max_min_match_brute_force():
+    x = np.random.default_rng(0).normal(size=301)
+    for half in (0, 1, 7, 40, 400):
+        np.testing.assert_array_equal(running_max(x, half), _brute(x, half, np.max))
+        np.testing.assert_array_equal(running_min(x, half), _brute(x, half, np.min))
+
+
+# --- decision logic ------------------------------------------------------------------------
+def test_hysteresis_enters_below_and_leaves_above_ratio():
+    stat = np.array([5, 3, 0.5, 1.5, 1.9, 2.5, 1.5, 0.9, 3.0])
+    thr = np.ones_like(stat)
+    np.testing.assert_array_equal(hysteresis_decision(stat, thr, 1.0),
+                                  [0, 0, 1, 0, 0, 0, 0, 1, 0])
+    np.testing.assert_array_equal(hysteresis_decision(stat, thr, 2.0),
+                                  [0, 0, 1, 1, 1, 0, 0, 1, 0])
+
+
+def test_short_run_filters():
+    f = np.array([0, 1, 1, 0, 1, 1, 1, 1, 0, 0, 1, 1, 1, 1], bool)
+    # still runs shorter than 3 dropped (the first, length 2); end runs count too
+    np.testing.assert_array_equal(drop_short_runs(f, 3), [0, 0, 0, 0, 1, 1, 1, 1, 0, 0, 1, 1, 1, 1])
+    np.testing.assert_array_equal(drop_short_runs(f, 5), np.zeros(14, bool))
+    # interior motion gaps shorter than 2 filled; the leading gap is not interior
+    np.testing.assert_array_equal(fill_short_runs(f, False, 2),
+                                  [0, 1, 1, 1, 1, 1, 1, 1, 0, 0, 1, 1, 1, 1])
+
+
+def test_quiet_runs_and_gait_adaptive_threshold():
+    # standing (1e4), then a "walk" with valleys 1e6 and swings 1e10, then a "run" with valleys
+    # 1e8 and swings 1e10.5, then a shuffle with no swing above the gait level (1e8 peaks)
+    walk = np.tile(np.r_[np.full(40, 1e6), np.full(60, 1e10)], 6)
+    run = np.tile(np.r_[np.full(20, 1e8), np.full(50, 10**10.5)], 8)
+    shuffle = np.tile(np.r_[np.full(30, 3e6), np.full(30, 1e8)], 6)
+    stat = np.r_[np.full(300, 1e4), walk, run, shuffle]
+    q = quiet_runs(stat, 1e5, 100)
+    assert q[:300].all() and not q[300:].any()
+    thr = gait_adaptive_threshold(stat, 150, 1e5, 10.0, 100.0, 1e9, 100, np.inf)
+    assert np.all(thr[:150] == 1e5)  # standing, far from any gait: the floor
+    i_walk = 300 + 300  # middle of the walk
+    assert thr[i_walk] == pytest.approx(1e7)  # 10 x valley level
+    i_run = 300 + 600 + 280  # middle of the run
+    assert thr[i_run] == pytest.approx(10**10.5 / 100)  # capped by peak / ratio
+    i_sh = 300 + 600 + 560 + 180
+    assert thr[i_sh] == 1e5  # no gait: floor only
+    still = hysteresis_decision(stat, thr, 1.0)
+    assert still[:300].all()
+    assert still[i_walk:i_walk + 40].all() and not still[i_walk + 40:i_walk + 100].any()
+    assert still[i_run:i_run + 20].all()  # running stance valleys are caught
+    assert not still[i_run + 20:i_run + 70].any()
+    assert not still[300 + 600 + 560 + 160:].any()  # shuffle valleys (3e6) are not
+
+
+# --- front end -----------------------------------------------------------------------------
+def _synthetic_gait(rate=200.0, seed=0):
+    """Rates table: 2 s still, then strides of 0.6 s stance / 0.5 s swing, body z up."""
+    rng = np.random.default_rng(seed)
+    dt = 1.0 / rate
+    pattern = []
+    pattern += [True] * int(2.0 * rate)
+    for _ in range(8):
+        pattern += [True] * int(0.6 * rate) + [False] * int(0.5 * rate)
+    pattern += [True] * int(1.0 * rate)
+    still = np.array(pattern)
+    n = still.size
+    t = np.arange(n) * dt
+    w = rng.normal(0, 0.002, (n, 3))
+    a = rng.normal(0, 0.01, (n, 3))
+    a[:, 2] += G
+    # swings: half-sine bursts of rotation (pitch) and acceleration
+    idx = np.flatnonzero(~still)
+    starts = idx[np.r_[True, np.diff(idx) > 1]]
+    m = int(0.5 * rate)
+    u = np.arange(m) / m
+    for s in starts:
+        w[s:s + m, 0] += 6.0 * np.sin(2 * np.pi * u)
+        a[s:s + m, 1] += 15.0 * np.sin(2 * np.pi * u)
+        a[s:s + m, 2] += 8.0 * np.sin(np.pi * u)
+    return rates_table(t, w, a), still
+
+
+@pytest.mark.parametrize("method,threshold", [
+    ("shoe", 1e3), ("are", 0.3), ("amv", 0.2), ("mag", 0.5), ("adaptive", 1e3)])
+def test_detectors_on_synthetic_gait(method, threshold):
+    imu, truth = _synthetic_gait()
+    cfg = DetectorConfig(method=method, window=0.025, threshold=threshold, sigma_a=0.01,
+                         sigma_w=0.1 * D, gravity=G, adapt_gait_peak=1e5)
+    res = detect_stillness(imu, cfg)
+    assert isinstance(res.still, pd.Series) and res.still.dtype == bool
+    np.testing.assert_array_equal(res.still.index.to_numpy(), imu.index.to_numpy())
+    agree = np.mean(res.still.to_numpy() == truth)
+    assert agree > 0.95, (method, agree)
+    # every swing is seen as motion: the middle third of each swing has no still sample
+    idx = np.flatnonzero(~truth)
+    starts = idx[np.r_[True, np.diff(idx) > 1]]
+    assert starts.size == 8
+    for s in starts:
+        assert not res.still.to_numpy()[s + 33:s + 67].any()
+    assert res.intervals()[0][0] == imu.index[0]
+
+
+def test_min_stance_removes_short_dips():
+    imu, truth = _synthetic_gait()
+    t = imu.index.to_numpy()
+    w = imu[["gyro_x", "gyro_y", "gyro_z"]].to_numpy().copy()
+    # a 20 ms "stillness" in the middle of the first swing
+    s = np.flatnonzero(~truth)[0] + 50
+    w[s:s + 4] = 0.0
+    a = imu[["accel_x", "accel_y", "accel_z"]].to_numpy().copy()
+    a[s:s + 4] = [0.0, 0.0, G]
+    base = DetectorConfig(method="shoe", window=0.01, threshold=1e3, sigma_a=0.01,
+                          sigma_w=0.1 * D, gravity=G)
+    s1, _, _ = detect_arrays(t, w, a, base)
+    assert s1[s:s + 4].any()
+    s2, _, _ = detect_arrays(t, w, a, DetectorConfig(**{**base.to_dict(), "min_stance": 0.05}))
+    assert not s2[s - 5:s + 10].any()
+    assert np.mean(s2 == truth) > 0.95
+
+
+def test_increment_table_gives_same_decisions():
+    imu, _ = _synthetic_gait()
+    t = imu.index.to_numpy()
+    w = imu[["gyro_x", "gyro_y", "gyro_z"]].to_numpy()
+    a = imu[["accel_x", "accel_y", "accel_z"]].to_numpy()
+    inc = increments_table(t, trapezoid_increments(t, w), trapezoid_increments(t, a))
+    cfg = DetectorConfig(method="are", window=0.05, threshold=0.3)
+    r1 = detect_stillness(imu, cfg).still.to_numpy()
+    r2 = detect_stillness(inc, cfg).still.to_numpy()
+    assert np.mean(r1 == r2) > 0.99
+
+
+def test_gravity_estimate_and_keyword_override():
+    imu, truth = _synthetic_gait()
+    r = detect_stillness(imu, method="mag", threshold=0.05, window=0.05)  # gravity estimated
+    assert np.mean(r.still.to_numpy()[truth]) > 0.9
+    assert r.method == "mag" and 0.5 < r.fraction < 0.8
+
+
+def test_config_validation():
+    with pytest.raises(ConfigError, match="unknown stillness detector"):
+        DetectorConfig(method="magic")
+    with pytest.raises(ConfigError, match="unknown detector settings"):
+        DetectorConfig.from_dict({"method": "shoe", "treshold": 3})
+    with pytest.raises(ConfigError):
+        DetectorConfig(hysteresis=0.5)
+    with pytest.raises(ConfigError):
+        DetectorConfig(window=0.0)
+    assert DetectorConfig.from_dict({"method": "are", "threshold": 0.2}).threshold == 0.2
