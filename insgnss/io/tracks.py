@@ -5,8 +5,8 @@ crash leaves the previous file or nothing under the final name) and refuse to ov
 path listed in ``protect`` (the run's inputs, :func:`insgnss.validate.ensure_not_input`).
 
 - **Trajectory CSV** (native, :mod:`insgnss.io.native`): ``time`` then the table's columns,
-  angles in degrees with a ``_deg`` suffix, NaN written as ``nan``; 15 significant digits so
-  that GPS-second times keep 10 us.
+  angles in degrees with a ``_deg`` suffix, NaN written as ``nan``; shortest round-trip floats
+  (pyarrow writer, :func:`insgnss.io.native.csv_writer`) unless ``float_format`` is given.
 - **Scorer CSV** (``shared/eval`` input): ``time_gpst_s lat_deg lon_deg height_m`` and, when the
   table has attitude, ``roll_deg pitch_deg yaw_deg`` (FRD body relative to NED, via
   :func:`insgnss.attitude.euler_to_ned`).
