@@ -117,9 +117,17 @@ def gauss_markov(rng: np.random.Generator, n: int, dt: float, sigma, tau, size: 
 
 
 def flicker_bank(rng: np.random.Generator, n: int, dt: float, B, band: tuple[float, float],
-                 per_decade: int = 3, size: int = 3) -> np.ndarray:
+                 per_decade: int = 3, size: int = 3, decimate: bool = True) -> np.ndarray:
     """Flicker (bias instability) noise of Allan floor ``0.664 B`` by a bank of Gauss-Markov
-    processes with correlation times log-spaced over ``band`` [s] (see module docstring)."""
+    processes with correlation times log-spaced over ``band`` [s] (see module docstring).
+
+    With ``decimate`` a process of correlation time T is generated on a coarse grid of step
+    ``h = m dt <= T / 40`` (``m`` a power of 4; processes sharing ``m`` are summed there) and
+    linearly interpolated to the sample times. This costs one interpolation per group instead of
+    a full-rate recursion per process, and changes the statistics by less than 1 % in variance
+    (``1 - var(mid-point) / sigma^2 ~ h / 2T``, and the missing content above ``1/h`` of the slow
+    processes is < 1.2 % of the Allan variance at any tau).
+    """
     lo, hi = band
     if not 0 < lo < hi:
         raise ValueError(f"flicker band must satisfy 0 < low < high; got {band}")
@@ -127,9 +135,27 @@ def flicker_bank(rng: np.random.Generator, n: int, dt: float, B, band: tuple[flo
     taus = np.geomspace(lo, hi, n_tau)
     B = np.broadcast_to(np.asarray(B, float), (size,))
     sig = B * np.sqrt(np.log(10.0) / (np.pi * per_decade))
+    if decimate:
+        ratio = np.maximum(taus / (40.0 * dt), 1.0)
+        m = (4 ** np.floor(np.log(ratio) / np.log(4.0))).astype(int)
+        m = np.minimum(m, max(1, 4 ** int(np.floor(np.log(max(n - 1, 1)) / np.log(4.0)))))
+    else:
+        m = np.ones(taus.size, int)
     out = np.zeros((n, size))
-    for T in taus:
-        out += gauss_markov(rng, n, dt, sig, T, size)
+    k = np.arange(n)
+    for mj in np.unique(m):
+        group = taus[m == mj]
+        if mj == 1:
+            for T in group:
+                out += gauss_markov(rng, n, dt, sig, T, size)
+            continue
+        nc = (n - 1) // mj + 2  # coarse samples covering the run
+        coarse = np.zeros((nc, size))
+        for T in group:
+            coarse += gauss_markov(rng, nc, mj * dt, sig, T, size)
+        j = k // mj
+        frac = ((k - j * mj) / mj)[:, None]
+        out += coarse[j] * (1.0 - frac) + coarse[j + 1] * frac
     return out
 
 
