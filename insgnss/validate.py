@@ -152,17 +152,15 @@ def split_lines(text: str, file, *, comment: tuple[str, ...] = ("#",), header: b
     With ``header=True`` the first remaining line is the header. Raises InputFormatError when no
     data line remains.
     """
-    raw = text.split("\n")
-    keep = []
-    comments = []
-    for i, line in enumerate(raw):
-        s = line.strip()
-        if not s:
-            continue
-        if comment and s.startswith(comment):
-            comments.append((i + 1, s))
-            continue
-        keep.append(i)
+    comment = tuple(c for c in comment if c)
+    stripped = [line.strip() for line in text.split("\n")]
+    if comment:
+        keep = [i for i, line in enumerate(stripped) if line and not line.startswith(comment)]
+        comments = [(i + 1, line) for i, line in enumerate(stripped)
+                    if line and line.startswith(comment)]
+    else:
+        keep = [i for i, line in enumerate(stripped) if line]
+        comments = []
     file = Path(file)
     head = head_no = None
     if header:
@@ -170,13 +168,13 @@ def split_lines(text: str, file, *, comment: tuple[str, ...] = ("#",), header: b
             raise InputFormatError("no header line", file=file, row=1, expected="a header line",
                                    found="only blank or comment lines")
         head_no = keep[0] + 1
-        head = raw[keep[0]].strip()
+        head = stripped[keep[0]]
         keep = keep[1:]
     if not keep:
-        row = (head_no + 1) if head_no else len(raw)
+        row = (head_no + 1) if head_no else len(stripped)
         raise InputFormatError("no data rows", file=file, row=row, expected="at least one data row",
                                found="none")
-    lines = [raw[i].strip() for i in keep]
+    lines = [stripped[i] for i in keep]
     return TextRows(file, lines, np.asarray(keep, dtype=np.int64) + 1, head, head_no, comments)
 
 
