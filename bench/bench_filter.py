@@ -42,7 +42,7 @@ def make_case(hours: float, rate: float, seed: int = 0):
     truth = car_truth(3600.0 * hours, rate)
     model = grade("tactical")
     imu, _ = corrupt_imu(truth, model, rng)
-    gnss = gnss_from_truth(truth, int(rate), rng, pos_std=(1.0, 1.0, 2.0), vel_std=(0.05, 0.05, 0.1))
+    gnss = gnss_from_truth(truth, rng)
     init, _ = perturbed_initial(truth, rng, 1.0, 0.1, (0.005, 0.005, 0.02))
     cfg = FilterConfig(imu_model=model, initial_pos_std=1.0, initial_vel_std=0.1,
                        initial_att_std=(0.005, 0.005, 0.02))
@@ -74,7 +74,7 @@ def mc(runs: int, duration: float, rate: float):
     for r in range(runs):
         rng = np.random.default_rng(1000 + r)
         imu, _ = corrupt_imu(truth, model, rng)
-        gnss = gnss_from_truth(truth, int(rate), rng)
+        gnss = gnss_from_truth(truth, rng)
         p0, v0, a0 = 1.0, 0.1, (0.005, 0.005, 0.02)
         init, _ = perturbed_initial(truth, rng, p0, v0, a0)
         cfg = FilterConfig(imu_model=model, initial_pos_std=p0, initial_vel_std=v0,

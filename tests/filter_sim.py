@@ -1,11 +1,16 @@
-"""Small, seeded simulation helpers for the filter tests and benchmark.
+"""Seeded simulation helpers for the filter tests and benchmark, on :mod:`insgnss.simulate`.
 
-Truth is built from smooth closed-form kinematic channels, positions by
-:func:`insgnss.mechanization.inverse.integrate_position`, and error-free IMU increments by
-:func:`insgnss.mechanization.inverse.inverse_mechanize`, so the forward mechanization of the
-clean increments reproduces the truth to rounding. Sensor errors are added with the same
-models the filter assumes (Gauss-Markov biases started from the filter's initial
-distribution, white ARW / VRW), which is what consistency (NEES/NIS) tests need.
+- Truth: :func:`insgnss.simulate.trajectory.generate` (segments; positions by the forward
+  mechanization's own trapezoidal rule, so ``mechanize(inverse_mechanize(truth)) == truth``).
+  :func:`car_truth` strings together a manoeuvre cycle (turns, speed changes, hills) and
+  optional stops.
+- IMU: :func:`insgnss.simulate.sensors.simulate_imu` on the ideal increments of
+  :func:`insgnss.mechanization.inverse.inverse_mechanize`, restricted to the errors the filter
+  models (turn-on bias + Gauss-Markov instability, ARW/VRW, optional scale factors; no
+  non-orthogonality, g-sensitivity, quantization), which is what consistency tests need. Two
+  extra bias modes used by single tests ("gm": the filter's ``gauss_markov`` model exactly;
+  "constant" with a chosen value) are synthesised here.
+- GNSS: :func:`insgnss.simulate.aiding.simulate_gnss` (white noise, antenna lever arm).
 """
 
 from __future__ import annotations
@@ -17,56 +22,70 @@ from scipy.signal import lfilter
 from insgnss.attitude import attitude_error, euler_to_dcm, rotvec_to_dcm
 from insgnss.earth import enu_displacement_to_geodetic, radii
 from insgnss.imu import ImuErrorModel, increments, increments_table
-from insgnss.mechanization.inverse import integrate_position, inverse_mechanize
+from insgnss.mechanization.inverse import inverse_mechanize
 from insgnss.mechanization.strapdown import NAV_COLS, NavState
+from insgnss.simulate.aiding import simulate_gnss
+from insgnss.simulate.sensors import simulate_imu
+from insgnss.simulate.trajectory import generate
 
 DEG = np.pi / 180.0
+LAT0, LON0, H0 = 45.0 * DEG, 7.0 * DEG, 250.0
+
+#: one manoeuvre cycle of the simulated car (~50 s): turns at speed, speed changes, a hill
+CAR_CYCLE = [
+    {"type": "turn", "angle": 70 * DEG, "rate": 14 * DEG},
+    {"type": "accelerate", "speed": 16.0, "acceleration": 1.2},
+    {"type": "turn", "angle": -110 * DEG, "rate": 14 * DEG},
+    {"type": "climb", "height_change": 3.0, "rate": 0.6},
+    {"type": "decelerate", "speed": 12.0, "acceleration": 1.2},
+    {"type": "turn", "angle": 40 * DEG, "rate": 10 * DEG},
+    {"type": "descend", "height_change": 3.0, "rate": 0.6},
+    {"type": "hold", "duration": 3.0},
+]
+STOP = [
+    {"type": "decelerate", "speed": 0.0, "acceleration": 1.5},
+    {"type": "static", "duration": None},
+    {"type": "accelerate", "speed": 12.0, "acceleration": 1.5},
+]
 
 
-def _window(t, stops, ramp):
-    """1 while moving, 0 in each stop interval, raised-cosine transitions of ``ramp`` s."""
-    w = np.ones_like(t)
-    for a, b in stops:
-        u_in = np.clip((t - (a - ramp)) / ramp, 0, 1)  # 0 -> 1 entering the stop
-        u_out = np.clip((t - b) / ramp, 0, 1)  # 0 -> 1 leaving the stop
-        down = 0.5 * (1 + np.cos(np.pi * u_in))  # 1 -> 0
-        up = 0.5 * (1 - np.cos(np.pi * u_out))  # 0 -> 1
-        f = np.where(t < b, down, up)
-        w = w * f
-    return w
-
-
-def car_truth(duration=300.0, rate=50.0, stops=(), speed=12.0, turn_rate=0.08, start_time=0.0,
-              lat0=45.0 * DEG, lon0=7.0 * DEG, h0=250.0, heading0=30.0 * DEG, ramp=8.0,
-              start_at_rest=False) -> pd.DataFrame:
-    """A manoeuvring car: varying speed, S-turns, gentle hills, optional stops."""
-    n = int(round(duration * rate)) + 1
-    t = start_time + np.arange(n) / rate
-    tr = t - start_time
-    stops_rel = [(a - start_time, b - start_time) for a, b in stops]
+def car_truth(duration=300.0, rate=50.0, stops_after=(), stop_duration=20.0, start_at_rest=False,
+              heading0=30.0 * DEG, start_time=0.0) -> pd.DataFrame:
+    """A manoeuvring car (12-16 m/s) for ``duration`` s; a stop of ``stop_duration`` s after
+    each cycle index in ``stops_after``. Columns NAV_COLS + ``stationary``."""
+    segs = []
     if start_at_rest:
-        stops_rel = [(-2 * ramp, 0.0)] + stops_rel
-    w = _window(tr, stops_rel, ramp)
-    v = w * (speed + 0.35 * speed * np.sin(2 * np.pi * tr / 47.0))
-    psid = w * turn_rate * (np.sin(2 * np.pi * tr / 41.0) + 0.5 * np.sin(2 * np.pi * tr / 13.0 + 1.0))
-    heading = heading0 + np.concatenate([[0.0], np.cumsum(0.5 * (psid[1:] + psid[:-1]) * np.diff(tr))])
-    pitch = 0.03 * np.sin(2 * np.pi * tr / 53.0)
-    roll = -0.01 * psid * v / 2.0
-    vh = v * np.cos(pitch)
-    vel = np.column_stack([vh * np.sin(heading), vh * np.cos(heading), v * np.sin(pitch)])
-    pos = integrate_position(t, vel, lat0, lon0, h0)
-    df = pd.DataFrame(
-        np.column_stack([pos, vel, roll, pitch, np.mod(heading, 2 * np.pi)]),
-        index=pd.Index(t, name="time"), columns=NAV_COLS,
-    )
-    return df
+        segs += [{"type": "static", "duration": 5.0}, dict(STOP[2])]
+    for c in range(int(duration // 40) + 2):
+        segs += [dict(x) for x in CAR_CYCLE]
+        if c in stops_after:
+            segs += [dict(STOP[0]), {"type": "static", "duration": stop_duration}, dict(STOP[2])]
+    traj = generate(rate=rate, lat=LAT0, lon=LON0, height=H0, heading=heading0,
+                    speed=0.0 if start_at_rest else 12.0, vehicle="land", segments=segs,
+                    duration=duration, start_time=start_time)
+    return traj.truth
 
 
-def static_truth(duration=60.0, rate=100.0, lat0=45.0 * DEG, lon0=7.0 * DEG, h0=250.0,
-                 roll=0.01, pitch=-0.02, heading=1.0) -> pd.DataFrame:
+def turning_truth(rate=100.0, speed=20.0, turn_rate=17 * DEG) -> pd.DataFrame:
+    """1.5 s inside the plateau of a fast turn (centripetal acceleration, yaw rate)."""
+    traj = generate(rate=rate, lat=LAT0, lon=LON0, height=H0, heading=0.3, speed=speed,
+                    segments=[{"type": "turn", "angle": 120 * DEG, "rate": turn_rate}])
+    t = traj.truth.index.to_numpy()
+    return traj.truth[(t >= 2.0) & (t <= 3.5 + 1e-9)]
+
+
+def stop_windows(truth: pd.DataFrame) -> list[tuple[float, float]]:
+    """(start, end) of the stationary intervals of a truth table."""
+    s = truth["stationary"].to_numpy() > 0.5
+    t = truth.index.to_numpy()
+    d = np.diff(np.r_[0, s.astype(int), 0])
+    return [(t[a], t[b - 1]) for a, b in zip(np.flatnonzero(d == 1), np.flatnonzero(d == -1), strict=True)]
+
+
+def static_truth(duration=60.0, rate=100.0, roll=0.01, pitch=-0.02, heading=1.0) -> pd.DataFrame:
     n = int(round(duration * rate)) + 1
     t = np.arange(n) / rate
-    data = np.tile([lat0, lon0, h0, 0, 0, 0, roll, pitch, heading], (n, 1))
+    data = np.tile([LAT0, LON0, H0, 0, 0, 0, roll, pitch, heading], (n, 1))
     return pd.DataFrame(data, index=pd.Index(t, name="time"), columns=NAV_COLS)
 
 
@@ -80,94 +99,71 @@ def _gm(rng, n, dt, x0, sigma, tau):
     return np.tile(np.asarray(x0, float), (n, 1))
 
 
+def filter_model_errors(model: ImuErrorModel, scale: bool = False) -> ImuErrorModel:
+    """The part of an IMU error model that the 15/21-state filter models."""
+    return model.scaled(gyro_misalignment=0.0, accel_misalignment=0.0, gyro_quantization=0.0,
+                        accel_quantization=0.0, gyro_range=0.0, accel_range=0.0,
+                        gyro_g_sensitivity=0.0,
+                        gyro_scale=model.gyro_scale if scale else 0.0,
+                        accel_scale=model.accel_scale if scale else 0.0)
+
+
 def corrupt_imu(truth: pd.DataFrame, model: ImuErrorModel, rng: np.random.Generator,
                 bias: str = "turn_on_gm", scale=False, bias0=None):
     """Sensor measurements (increment table) of a truth trajectory, and the true errors.
 
-    Biases (``bias``):
+    ``bias``: ``"turn_on_gm"`` (default; :func:`insgnss.simulate.sensors.simulate_imu`: constant
+    turn-on bias + stationary Gauss-Markov instability, the filter's ``random_walk`` model is
+    consistent with it for runs shorter than the correlation time), ``"gm"`` (a Gauss-Markov
+    process started from ``N(0, turn_on^2 + sigma^2)``: the filter's ``gauss_markov`` model),
+    ``"constant"`` (``bias0`` (6,) or a draw, held constant).
 
-    - ``"turn_on_gm"`` (default, what real sensors do): a constant turn-on bias
-      ``N(0, turn_on^2)`` plus a stationary first-order Gauss-Markov instability
-      ``(sigma, tau)``; the filter's ``random_walk`` model (PSD ``2 sigma^2 / tau``) is
-      consistent with it for runs shorter than ``tau``;
-    - ``"gm"``: a Gauss-Markov process started from ``N(0, turn_on^2 + sigma^2)``, exactly the
-      filter's ``gauss_markov`` model;
-    - ``"constant"``: ``N(0, turn_on^2 + sigma^2)`` held constant.
-
-    ``bias0`` (6,) overrides the initial draw. White noise: ARW / VRW. Scale factors (if
-    ``scale``): ``N(0, gyro_scale^2)`` etc., measured = (1 + s) true + b.
-
-    Returns
-    -------
-    imu : DataFrame (increments)
-    errors : dict with ``gyro_bias`` (N, 3), ``accel_bias`` (N, 3), ``gyro_scale``,
-        ``accel_scale`` (3,)
+    Returns ``(imu, errors)`` with ``errors`` holding ``gyro_bias``, ``accel_bias`` (N, 3)
+    and ``gyro_scale``, ``accel_scale`` (3,).
     """
-    clean = inverse_mechanize(truth)
-    t, dth, dv = increments(clean)
+    ideal = inverse_mechanize(truth.drop(columns=["stationary"], errors="ignore"))
+    m = filter_model_errors(model, scale)
+    if bias == "turn_on_gm" and bias0 is None:
+        sim = simulate_imu(ideal, m, rng)
+        b = sim.bias.to_numpy()
+        return sim.imu, {"gyro_bias": b[:, :3], "accel_bias": b[:, 3:],
+                         "gyro_scale": sim.params["gyro_scale"], "accel_scale": sim.params["accel_scale"]}
+    t, dth, dv = increments(ideal)
     n = t.size
     dt = np.diff(t, prepend=t[0] - (t[1] - t[0]))
     d0 = float(np.median(np.diff(t)))
-    tau = model.bias_correlation_time
     out = []
-    for turn_on, instab, k in ((model.gyro_bias, model.gyro_bias_instability, 0),
-                               (model.accel_bias, model.accel_bias_instability, 3)):
-        if bias == "turn_on_gm":
-            b0 = rng.standard_normal(3) * turn_on if bias0 is None else np.asarray(bias0[k:k + 3], float)
-            g0 = rng.standard_normal(3) * instab
-            b = b0 + _gm(rng, n, d0, g0, instab, tau)
-        elif bias == "gm":
-            s0 = np.hypot(turn_on, instab)
-            b0 = rng.standard_normal(3) * s0 if bias0 is None else np.asarray(bias0[k:k + 3], float)
-            b = _gm(rng, n, d0, b0, instab, tau)
+    for turn_on, instab, k in ((m.gyro_bias, m.gyro_bias_instability, 0),
+                               (m.accel_bias, m.accel_bias_instability, 3)):
+        s0 = np.hypot(turn_on, instab)
+        b0 = rng.standard_normal(3) * s0 if bias0 is None else np.asarray(bias0[k:k + 3], float)
+        if bias == "gm":
+            out.append(_gm(rng, n, d0, b0, instab, m.bias_correlation_time))
         elif bias == "constant":
-            s0 = np.hypot(turn_on, instab)
-            b0 = rng.standard_normal(3) * s0 if bias0 is None else np.asarray(bias0[k:k + 3], float)
-            b = np.tile(b0, (n, 1))
+            out.append(np.tile(b0, (n, 1)))
         else:
             raise ValueError(bias)
-        out.append(b)
     bg, ba = out
-    sg = rng.standard_normal(3) * model.gyro_scale if scale else np.zeros(3)
-    sa = rng.standard_normal(3) * model.accel_scale if scale else np.zeros(3)
+    sg = rng.standard_normal(3) * m.gyro_scale
+    sa = rng.standard_normal(3) * m.accel_scale
     sq = np.sqrt(dt)[:, None]
-    dth_m = dth * (1 + sg) + bg * dt[:, None] + rng.standard_normal((n, 3)) * model.gyro_arw * sq
-    dv_m = dv * (1 + sa) + ba * dt[:, None] + rng.standard_normal((n, 3)) * model.accel_vrw * sq
+    dth_m = dth * (1 + sg) + bg * dt[:, None] + rng.standard_normal((n, 3)) * m.gyro_arw * sq
+    dv_m = dv * (1 + sa) + ba * dt[:, None] + rng.standard_normal((n, 3)) * m.accel_vrw * sq
     dth_m[0] = 0.0
     dv_m[0] = 0.0
     imu = increments_table(t, dth_m, dv_m)
     return imu, {"gyro_bias": bg, "accel_bias": ba, "gyro_scale": sg, "accel_scale": sa}
 
 
-def gnss_from_truth(truth: pd.DataFrame, every: int, rng: np.random.Generator, pos_std=(1.0, 1.0, 2.0),
-                    vel_std=(0.05, 0.05, 0.1), lever_arm=(0.0, 0.0, 0.0), start: int = 0,
-                    omega_b=None) -> pd.DataFrame:
-    """GNSS table sampled every ``every`` truth rows, with antenna lever arm and white noise.
-
-    ``omega_b`` (N, 3) true body angular rate for the lever-arm velocity (optional).
-    """
-    rows = np.arange(start, len(truth), every)
-    tr = truth.iloc[rows]
-    C = euler_to_dcm(tr["roll"].to_numpy(), tr["pitch"].to_numpy(), tr["heading"].to_numpy())
-    la = C @ np.asarray(lever_arm, float)
-    ps = np.asarray(pos_std, float)
-    vs = np.asarray(vel_std, float)
-    noise = rng.standard_normal((rows.size, 3)) * ps
-    d = la + noise
-    lat = tr["lat"].to_numpy()
-    h = tr["height"].to_numpy()
-    dlat, dlon, dh = enu_displacement_to_geodetic(lat, h, d[:, 0], d[:, 1], d[:, 2])
-    vel = tr[["vel_e", "vel_n", "vel_u"]].to_numpy()
-    if omega_b is not None:
-        vel = vel + np.einsum("kij,kj->ki", C, np.cross(omega_b[rows], np.asarray(lever_arm, float)))
-    vel = vel + rng.standard_normal((rows.size, 3)) * vs
-    df = pd.DataFrame({
-        "lat": lat + dlat, "lon": tr["lon"].to_numpy() + dlon, "height": h + dh,
-        "east_std": ps[0], "north_std": ps[1], "up_std": ps[2],
-        "vel_e": vel[:, 0], "vel_n": vel[:, 1], "vel_u": vel[:, 2],
-        "vel_e_std": vs[0], "vel_n_std": vs[1], "vel_u_std": vs[2],
-    }, index=pd.Index(truth.index.to_numpy()[rows], name="time"))
-    return df
+def gnss_from_truth(truth: pd.DataFrame, rng: np.random.Generator, rate: float = 1.0,
+                    horizontal_std: float = 1.0, vertical_std: float = 2.0, velocity_std: float = 0.05,
+                    vertical_velocity_std: float = 0.1, lever_arm=(0.0, 0.0, 0.0)) -> pd.DataFrame:
+    """GNSS position + velocity with white errors and antenna lever arm
+    (:func:`insgnss.simulate.aiding.simulate_gnss`), epochs every ``1/rate`` s from the first
+    truth sample."""
+    return simulate_gnss(truth, rng, rate=rate, horizontal_std=horizontal_std, vertical_std=vertical_std,
+                         velocity=True, velocity_std=velocity_std,
+                         vertical_velocity_std=vertical_velocity_std, lever_arm=lever_arm)
 
 
 def perturbed_initial(truth: pd.DataFrame, rng: np.random.Generator, pos_std=0.0, vel_std=0.0,
@@ -218,12 +214,3 @@ def error_vector_at(est_row_times, errors: pd.DataFrame) -> np.ndarray:
     """(E, 9) error vectors (dr, dv, phi) at the given times."""
     e = errors.loc[est_row_times]
     return e[["east", "north", "up", "vel_e", "vel_n", "vel_u", "phi_e", "phi_n", "phi_u"]].to_numpy()
-
-
-def true_body_rates(truth: pd.DataFrame) -> np.ndarray:
-    """Approximate true body angular rate (N, 3) from the clean increments (for lever arms)."""
-    t, dth, _ = increments(inverse_mechanize(truth))
-    w = np.zeros_like(dth)
-    w[1:] = dth[1:] / np.diff(t)[:, None]
-    w[0] = w[1]
-    return w

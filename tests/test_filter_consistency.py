@@ -35,7 +35,7 @@ def test_monte_carlo_nees_nis_inside_chi2_bounds():
     for r in range(runs):
         rng = np.random.default_rng(1000 + r)
         imu, _ = corrupt_imu(truth, model, rng)
-        gnss = gnss_from_truth(truth, 50, rng)
+        gnss = gnss_from_truth(truth, rng)
         init, _ = perturbed_initial(truth, rng, P0, V0, A0)
         cfg = FilterConfig(imu_model=model, initial_pos_std=P0, initial_vel_std=V0, initial_att_std=A0,
                            smoother=False, gate_probability=None)
@@ -62,7 +62,7 @@ def test_horizontal_rms_below_gnss_sigma():
     rng = np.random.default_rng(7)
     imu, _ = corrupt_imu(truth, model, rng)
     sigma = 1.0
-    gnss = gnss_from_truth(truth, 50, rng, pos_std=(sigma, sigma, 2 * sigma))
+    gnss = gnss_from_truth(truth, rng, horizontal_std=sigma, vertical_std=2 * sigma)
     init, _ = perturbed_initial(truth, rng, P0, V0, A0)
     res = run_filter(imu, init, [GnssPosition(gnss), GnssVelocity(gnss)],
                      FilterConfig(imu_model=model, initial_att_std=A0))
@@ -81,7 +81,7 @@ def test_heading_converges_from_10_deg_tactical():
     truth = car_truth(120.0, 50.0)
     rng = np.random.default_rng(17)
     imu, _ = corrupt_imu(truth, model, rng)
-    gnss = gnss_from_truth(truth, 50, rng)
+    gnss = gnss_from_truth(truth, rng)
     init = initial_with_error(truth, np.r_[0.5, -0.5, 1.0, 0.05, -0.05, 0.02, 0.003, -0.003, 10 * DEG])
     cfg = FilterConfig(imu_model=model, initial_att_std=(0.005, 0.005, 12 * DEG))
     res = run_filter(imu, init, [GnssPosition(gnss), GnssVelocity(gnss)], cfg)
@@ -99,7 +99,7 @@ def test_gating_rejects_gnss_jumps():
     truth = car_truth(300.0, 50.0)
     rng = np.random.default_rng(23)
     imu, _ = corrupt_imu(truth, model, rng)
-    gnss = gnss_from_truth(truth, 50, rng)
+    gnss = gnss_from_truth(truth, rng)
     init, _ = perturbed_initial(truth, rng, P0, V0, A0)
     cfg = FilterConfig(imu_model=model, initial_att_std=A0)
     clean = run_filter(imu, init, [GnssPosition(gnss), GnssVelocity(gnss)], cfg)

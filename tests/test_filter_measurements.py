@@ -15,7 +15,7 @@ from filter_sim import (
     nav_errors,
     perturbed_initial,
     static_truth,
-    true_body_rates,
+    stop_windows,
 )
 
 from insgnss.attitude import euler_to_dcm, rotvec_to_dcm
@@ -166,30 +166,30 @@ def test_gnss_quality_weighting_and_missing_columns():
 
 
 # --- scenarios ----------------------------------------------------------------------------------
-def _stop_indices(truth, stops, guard=0.5):
+def _stop_indices(truth, guard=0.5):
     t = truth.index.to_numpy()
     m = np.zeros(t.size, bool)
-    for a, b in stops:
+    for a, b in stop_windows(truth):
         m |= (t >= a + guard) & (t <= b)
     return m
 
 
 def test_zupt_bounds_velocity_error_at_stops_mems():
-    stops = [(70.0, 90.0), (150.0, 175.0)]
-    truth = car_truth(200.0, 100.0, stops=stops)
+    truth = car_truth(200.0, 100.0, stops_after=(0, 1))
+    assert len(stop_windows(truth)) == 2
     model = grade("mems")
     rng = np.random.default_rng(11)
     imu, _ = corrupt_imu(truth, model, rng)
-    gnss = gnss_from_truth(truth, 100, rng, pos_std=(1.5, 1.5, 3.0))
+    gnss = gnss_from_truth(truth, rng, horizontal_std=1.5, vertical_std=3.0)
     init, _ = perturbed_initial(truth, rng, 1.0, 0.1, (0.01, 0.01, 0.05))
     t = truth.index.to_numpy()
-    in_stop = _stop_indices(truth, stops, guard=0.0)
+    in_stop = _stop_indices(truth, guard=0.0)
     zupt = Zupt(t[in_stop][::10], std=0.005)  # 10 Hz during the stops
     cfg = FilterConfig(imu_model=model, initial_att_std=(0.01, 0.01, 0.05))
     res = run_filter(imu, init, [GnssPosition(gnss), zupt], cfg)
     err = nav_errors(res.forward, truth)
     vel_err = np.linalg.norm(err[["vel_e", "vel_n", "vel_u"]].to_numpy(), axis=1)
-    stop = _stop_indices(truth, stops, guard=0.5)
+    stop = _stop_indices(truth, guard=0.5)
     assert vel_err[stop].max() < 0.01
     # without ZUPT the velocity error in the stops is much larger
     res0 = run_filter(imu, init, [GnssPosition(gnss)], cfg)
@@ -220,20 +220,21 @@ def test_zaru_estimates_vertical_gyro_bias_mems():
 
 
 def test_cupt_removes_accumulated_error():
-    stops = [(250.0, 270.0)]
-    truth = car_truth(280.0, 50.0, stops=stops)
+    truth = car_truth(280.0, 50.0, stops_after=(4,))
+    (s0, s1), = stop_windows(truth)
+    assert s0 > 200.0 and s1 < 280.0
     model = grade("tactical")
     rng = np.random.default_rng(21)
     imu, _ = corrupt_imu(truth, model, rng)
-    gnss = gnss_from_truth(truth, 50, rng)
+    gnss = gnss_from_truth(truth, rng)
     gnss = gnss[gnss.index < 100.0]  # GNSS lost after 100 s
     init, _ = perturbed_initial(truth, rng, 1.0, 0.1, (0.005, 0.005, 0.02))
-    t_cp = 260.0
+    t_cp = float(np.round(0.5 * (s0 + s1)))
     cp = truth.loc[t_cp]
     sigma = 0.05
     cupt = Cupt([t_cp], cp["lat"], cp["lon"], cp["height"], std=sigma)
     t = truth.index.to_numpy()
-    zupt = Zupt(t[(t >= 250.5) & (t <= 270)][::5], std=0.005)
+    zupt = Zupt(t[(t >= s0 + 0.5) & (t <= s1)][::5], std=0.005)
     cfg = FilterConfig(imu_model=model, initial_att_std=(0.005, 0.005, 0.02))
     before = nav_errors(run_filter(imu, init, [GnssPosition(gnss), zupt], cfg).forward, truth)
     res = run_filter(imu, init, [GnssPosition(gnss), zupt, cupt], cfg)
@@ -266,7 +267,7 @@ def test_odometer_scale_and_nhc_estimated():
     model = grade("tactical")
     rng = np.random.default_rng(4)
     imu, _ = corrupt_imu(truth, model, rng)
-    gnss = gnss_from_truth(truth, 50, rng)
+    gnss = gnss_from_truth(truth, rng)
     init, _ = perturbed_initial(truth, rng, 1.0, 0.1, (0.005, 0.005, 0.02))
     C = euler_to_dcm(truth["roll"].to_numpy(), truth["pitch"].to_numpy(), truth["heading"].to_numpy())
     vb = np.einsum("kji,kj->ki", C, truth[["vel_e", "vel_n", "vel_u"]].to_numpy())
@@ -286,13 +287,13 @@ def test_odometer_scale_and_nhc_estimated():
 
 
 def test_lever_arm_is_needed_and_used():
-    truth = car_truth(200.0, 50.0, turn_rate=0.15)
+    truth = car_truth(200.0, 50.0)
     model = grade("tactical")
     rng = np.random.default_rng(9)
     imu, _ = corrupt_imu(truth, model, rng)
     arm = np.array([0.6, 1.8, 1.2])
-    gnss = gnss_from_truth(truth, 50, rng, pos_std=(0.05, 0.05, 0.1), vel_std=(0.01, 0.01, 0.02),
-                           lever_arm=arm, omega_b=true_body_rates(truth))
+    gnss = gnss_from_truth(truth, rng, horizontal_std=0.05, vertical_std=0.1, velocity_std=0.01,
+                           vertical_velocity_std=0.02, lever_arm=arm)
     init, _ = perturbed_initial(truth, rng, 0.05, 0.01, (0.005, 0.005, 0.02))
     cfg = FilterConfig(imu_model=model, initial_pos_std=0.1, initial_vel_std=0.05,
                        initial_att_std=(0.005, 0.005, 0.02), gate_probability=None)

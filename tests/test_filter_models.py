@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 import scipy.linalg
-from filter_sim import car_truth
+from filter_sim import turning_truth
 
 from insgnss.attitude import attitude_error, euler_to_dcm, rotvec_to_dcm
 from insgnss.earth import radii
@@ -78,9 +78,9 @@ def _err(a, b):
 @pytest.mark.parametrize("scale_factors", [False, True])
 def test_transition_matrix_matches_perturbed_strapdown(scale_factors):
     """Phi from the compiled F (1 s, 0.1 s sub-intervals, manoeuvring car at 20 m/s turning
-    0.3 rad/s) predicts the difference of two strapdown runs started from states that differ
+    17 deg/s) predicts the difference of two strapdown runs started from states that differ
     by one error-state direction, for every direction (signs and couplings of all blocks)."""
-    truth = car_truth(1.5, 100.0, speed=20.0, turn_rate=0.3, start_time=13.0)
+    truth = turning_truth()
     t, dth, dv = increments(inverse_mechanize(truth))
     lay = StateLayout(scale_factors)
     n = lay.n

@@ -69,7 +69,8 @@ def test_outages_forward_within_3_sigma_and_smoother_5x_better():
     model = grade("tactical")
     rng = np.random.default_rng(31)
     imu, _ = corrupt_imu(truth, model, rng)
-    gnss = gnss_from_truth(truth, 50, rng, pos_std=(0.3, 0.3, 0.6), vel_std=(0.03, 0.03, 0.06))
+    gnss = gnss_from_truth(truth, rng, horizontal_std=0.3, vertical_std=0.6, velocity_std=0.03,
+                           vertical_velocity_std=0.06)
     keep = np.ones(len(gnss), bool)
     for a, b in outages:
         keep &= ~((gnss.index > a) & (gnss.index < b))

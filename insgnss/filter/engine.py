@@ -78,6 +78,12 @@ class FilterConfig:
         Default chi-square gating probability; ``None`` or 0 disables gating.
     gate_probabilities : dict
         Per measurement type (``Measurement.name``) overrides.
+    gate_recovery : float or None
+        When every measurement of one type has been rejected for longer than this [s], the
+        filter's covariance is taken to be wrong, not the measurements: the navigation blocks
+        (position, velocity, attitude) of ``P`` are inflated until the measurement sits on the
+        gate and it is applied (logged with ``recovered=True``). ``None`` disables it (a filter
+        that lost lock then never recovers).
     smoother : bool
         Run the RTS smoother.
     initial_pos_std, initial_vel_std : float or 3-vector
@@ -104,6 +110,7 @@ class FilterConfig:
     discretization: str = "second_order"
     gate_probability: float | None = 0.9999
     gate_probabilities: dict = field(default_factory=dict)
+    gate_recovery: float | None = 5.0
     smoother: bool = True
     initial_pos_std: float | tuple = 1.0
     initial_vel_std: float | tuple = 0.1
@@ -149,7 +156,7 @@ class FilterResult:
     smoothed : DataFrame or None
         The same columns from the RTS smoother.
     innovations : DataFrame
-        One row per measurement evaluated: ``time type dof nis threshold accepted`` and
+        One row per measurement evaluated: ``time type dof nis threshold accepted recovered`` and
         ``innov_k``, ``innov_std_k`` for each component.
     rejected : DataFrame
         The rows of ``innovations`` that the gate rejected.
@@ -236,6 +243,20 @@ def _epoch_schedule(t, measurements, epoch_interval, tol):
     ev_e, ev_m, ev_r = ev_e[order], ev_m[order], ev_r[order]
     ptr = np.searchsorted(ev_e, np.arange(ep.size + 1))
     return ep, ev_m, ev_r, ptr
+
+
+def _inflate_for(P, H, R, z, thr):
+    """P with its navigation blocks (states 0-8) scaled so that ``z`` has NIS ~ thr / 2."""
+    P = P.copy()
+    nav = slice(0, 9)
+    Hn = H[:, nav]
+    for _ in range(60):
+        S = H @ P @ H.T + R
+        if kernels.nis(S, z) <= 0.5 * thr or not np.any(Hn):
+            break
+        P[nav, :] *= 2.0 ** 0.5
+        P[:, nav] *= 2.0 ** 0.5
+    return P
 
 
 def _check(x, P, time, what):
@@ -337,6 +358,8 @@ def run_filter(
     nav.gyro_psd = pm.gyro_psd
     gate_cache: dict = {}
     log = []  # (time, type, dof, nis, threshold, accepted, y, s)
+    streak: dict = {}  # measurement type -> time of its first rejection since an acceptance
+    recoveries: list = []
 
     timing = {"mechanization": 0.0, "covariance": 0.0, "updates": 0.0}
     j, frac = 1, 0.0
@@ -416,7 +439,20 @@ def run_filter(
                     else:
                         thr = np.inf
                     ok = nis <= thr  # False for NaN
+                    recovered = False
+                    if ok:
+                        streak.pop(m.name, None)
+                    elif np.isfinite(nis):
+                        t_first = streak.setdefault(m.name, te)
+                        if config.gate_recovery is not None and te - t_first > config.gate_recovery:
+                            P = _inflate_for(P, H, R, z, thr)
+                            S = H @ P @ H.T + R
+                            nis = kernels.nis(S, z)
+                            ok = recovered = True
+                            streak.pop(m.name, None)
                     log.append((te, m.name, dof, nis, thr, ok, z, S))
+                    if recovered:
+                        recoveries.append((te, m.name))
                     if ok:
                         zs.append(z)
                         Hs.append(H)
@@ -472,6 +508,8 @@ def run_filter(
     cols = {"time": [r[0] for r in log], "type": [r[1] for r in log],
             "dof": [r[2] for r in log], "nis": [r[3] for r in log],
             "threshold": [r[4] for r in log], "accepted": [bool(r[5]) for r in log]}
+    rec = set(recoveries)
+    cols["recovered"] = [(r[0], r[1]) in rec for r in log]
     for k in range(ncomp):
         cols[f"innov_{k}"] = [r[6][k] if r[2] > k else np.nan for r in log]
     for k in range(ncomp):
