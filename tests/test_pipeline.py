@@ -1,0 +1,92 @@
+"""End-to-end jobs: the real drive (issue 5 must-show numbers), job errors, outputs, report."""
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from insgnss.config import load_job, load_job_dict
+from insgnss.pipeline import outage_windows, run_job, write_outputs
+
+REPO = Path(__file__).resolve().parents[1]
+
+
+@pytest.fixture(scope="module")
+def drive_result(request):
+    from conftest import shared_data
+
+    shared_data("gnss-imu-rtklibexplorer", "drive_0708")
+    job = load_job(REPO / "scenarios" / "drive_0708.toml")
+    return run_job(job, progress=False)
+
+
+def test_drive_outage_benchmark(drive_result):
+    """Real car drive, the data author's 11 x 15 s outages, scored against Q=1 RTK epochs."""
+    res = drive_result
+    assert res.filter.complete
+    assert len(res.windows) == 11
+    fwd = res.evaluation["forward"]["summary"]
+    smo = res.evaluation["smoothed"]["summary"]
+    # every reference epoch after the IMU log starts (3.4 s after the first fix) is covered
+    ref_t = res.inputs.reference.index.to_numpy()
+    assert fwd["n_covered"] == int((ref_t >= res.inputs.imu.index[0]).sum())
+    # forward (causal): mean end-of-outage horizontal error <= 3.0 m (peers: 6.2-6.5 m)
+    assert fwd["end_h_err_m_mean"] <= 3.0
+    # smoothed: mean in-outage horizontal RMS <= 0.25 m (best peer: 0.28 m)
+    assert smo["rms_h_err_m_mean"] <= 0.25
+    # outside the outages both follow the RTK solution within 5 cm RMS
+    assert fwd["non_outage_rms_h_m"] <= 0.05
+    assert smo["non_outage_rms_h_m"] <= 0.05
+    # the estimated residual IMU time offset is physically small
+    assert abs(res.summary["preprocessing"]["imu_time_offset_estimated_s"]) < 0.2
+
+
+def test_drive_outputs_and_report(drive_result, tmp_path):
+    paths = write_outputs(drive_result, tmp_path)
+    for name in ("forward.csv", "smoothed.csv", "innovations.csv", "rejected.csv",
+                 "summary.json", "report.html"):
+        assert (tmp_path / name).stat().st_size > 0, name
+    summary = json.loads((tmp_path / "summary.json").read_text())
+    assert summary["complete"] and summary["evaluation"]["smoothed"]["rms_h_err_m_mean"] < 0.25
+    html = (tmp_path / "report.html").read_text()
+    assert html.count("data:image/png;base64,") >= 4
+    for text in ("Summary", "Accuracy against the reference", "Track", "Position errors",
+                 "Drift inside outages", "IMU biases", "Innovations"):
+        assert text in html
+    assert "<script" not in html  # static page, opens offline
+    assert set(paths) >= {"forward.csv", "summary.json"}
+
+
+def test_outage_windows_explicit_and_periodic():
+    job = load_job_dict({"outages": {"windows": [[10.0, 20.0]], "relative_to": "first_gnss"}})
+    import pandas as pd
+
+    gnss = pd.DataFrame({"lat": [0.0] * 3}, index=[100.0, 150.0, 200.0])
+    assert outage_windows(job, gnss) == [(110.0, 120.0)]
+    job = load_job_dict({"outages": {"periodic": {"start": 10.0, "length": 5.0, "gap": 20.0}}})
+    w = outage_windows(job, gnss)
+    assert w[0] == (110.0, 115.0) and w[1] == (135.0, 140.0) and len(w) == 4
+
+
+def test_process_cli_reports_job_errors_cleanly(tmp_path):
+    bad = tmp_path / "job.toml"
+    bad.write_text("[filter]\nsmoothr = true\n")
+    r = subprocess.run([sys.executable, "-m", "insgnss.cli", "process", str(bad)],
+                       capture_output=True, text=True)
+    assert r.returncode == 2
+    assert "filter.smoothr" in r.stderr and "Traceback" not in r.stderr
+
+
+def test_outputs_never_overwrite_inputs(tmp_path, drive_result, monkeypatch):
+    """An output whose path is an input of the job is refused and the input is untouched."""
+    from insgnss.errors import ConfigError
+
+    victim = tmp_path / "forward.csv"
+    victim.write_text("precious input\n")
+    job = drive_result.job
+    monkeypatch.setattr(type(job), "input_paths", lambda self: [victim])
+    with pytest.raises(ConfigError, match="refusing to overwrite an input"):
+        write_outputs(drive_result, tmp_path)
+    assert victim.read_text() == "precious input\n"
