@@ -38,6 +38,7 @@ from .imu import ACCEL_COLS, GYRO_COLS, ImuErrorModel, grade
 from .mechanization.strapdown import NavState, mechanize
 from .outages import in_windows, periodic_windows
 from .preprocess import estimate_time_offset, shift_time, with_static_noise
+from .validate import check_gnss_in_imu_span
 
 
 # --- inputs -----------------------------------------------------------------------------------
@@ -102,9 +103,9 @@ def _read_imu(job: Job) -> pd.DataFrame:
 
         return read_kfgins_imu(path)
     if fmt == "native":
-        from .io.native import read_table
+        from .io.tracks import read_trajectory_csv
 
-        return read_table(path)
+        return read_trajectory_csv(path, required=())
     from .io.imu_csv import read_imu_csv
 
     return read_imu_csv(path, columns=spec["columns"], gyro_unit=spec["gyro_unit"],
@@ -134,9 +135,9 @@ def _read_gnss(job: Job) -> pd.DataFrame | None:
 
         g = read_kfgins_gnss(path)
     else:
-        from .io.native import read_table
+        from .io.tracks import read_trajectory_csv
 
-        g = read_table(path)
+        g = read_trajectory_csv(path)
     if spec["time_offset"]:
         g = g.set_axis(g.index + spec["time_offset"], axis=0)
     return g
@@ -153,14 +154,10 @@ def _read_reference(job: Job) -> pd.DataFrame | None:
         ref = read_rtklib_pos(path)
         if spec["q"] is not None:
             ref = ref[ref["q"].isin([float(q) for q in spec["q"]])]
-    elif spec["format"] == "kfgins_nav":
-        from .io.kfgins import read_kfgins_nav
-
-        ref = read_kfgins_nav(path)
     else:
-        from .io.native import read_table
+        from .io.reference import read_reference
 
-        ref = read_table(path)
+        ref = read_reference(path, "kfgins-nav" if spec["format"] == "kfgins_nav" else "native")
     return ref
 
 
@@ -422,8 +419,8 @@ def build_measurements(job: Job, inputs: Inputs, windows, imu: pd.DataFrame) -> 
     out = []
     gnss = inputs.gnss
     if gnss is not None and len(gnss):
-        g = gnss[~in_windows(gnss.index.to_numpy(float), windows)]
-        g = g[(g.index >= imu.index[0]) & (g.index <= imu.index[-1])]
+        g = check_gnss_in_imu_span(gnss, imu, policy="trim")  # warns, names the file/lines
+        g = g[~in_windows(g.index.to_numpy(float), windows)]
         scale = {int(float(k)): float(v) for k, v in a["q_scale"].items()}
         use_q = list(scale) if "q" in g.columns else None
         if a["gnss_position"]:
