@@ -74,3 +74,15 @@ def test_simulation_tables_match_simulator():
     from insgnss.simulate.scenario import SIM_TABLES
 
     assert set(SIM_TABLES) <= set(SIMULATION_TABLES)
+
+
+def test_docs_jobs_md_lists_every_key():
+    from pathlib import Path
+
+    from insgnss.config import schema_markdown
+
+    doc = (Path(__file__).resolve().parents[1] / "docs" / "jobs.md").read_text()
+    for line in schema_markdown().splitlines():
+        if line.startswith("| `"):
+            key = line.split("`")[1]
+            assert f"`{key}`" in doc, f"docs/jobs.md lacks {key}"
