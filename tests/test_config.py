@@ -86,3 +86,15 @@ def test_docs_jobs_md_lists_every_key():
         if line.startswith("| `"):
             key = line.split("`")[1]
             assert f"`{key}`" in doc, f"docs/jobs.md lacks {key}"
+
+
+def test_docs_jobs_md_examples_are_valid_jobs():
+    import re
+    import tomllib
+    from pathlib import Path
+
+    doc = (Path(__file__).resolve().parents[1] / "docs" / "jobs.md").read_text()
+    blocks = re.findall(r"```toml\n(.*?)```", doc, flags=re.S)
+    assert len(blocks) >= 5
+    for b in blocks:
+        load_job_dict(tomllib.loads(b), "docs/jobs.md")
