@@ -269,9 +269,9 @@ def riss_step(st, k, t, dthz, fx, fy, aod, vw, vbar, vod, par, gravity_model, az
     """Advance the RISS state ``st`` (see ``ST_*``) in place over interval k = (t[k-1], t[k]].
 
     ``par`` holds the sensor-error estimates (``PAR_*``: odometer scale, gyro z bias, accel x and
-    y biases, gyro z scale factor); ``cols`` is a (5, 3) scratch array. ``aux`` (length 8)
+    y biases, gyro z scale factor); ``cols`` is a (5, 3) scratch array. ``aux`` (length 9)
     receives quantities of the interval for the error model (all compensated):
-    ``[w_lb_z, v_mean, a_od, g, dA/dt, w_il_bz, v_od(t[k]), w_z]``.
+    ``[w_lb_z, v_mean, a_od, g, dA/dt, w_il_bz, v_od(t[k]), w_z, dp/dt]``.
     """
     dt = t[k] - t[k - 1]
     lat, lon, h = st[ST_LAT], st[ST_LON], st[ST_H]
@@ -316,13 +316,13 @@ def riss_step(st, k, t, dthz, fx, fy, aod, vw, vbar, vod, par, gravity_model, az
     cr = np.cos(r)
     # azimuth (eq. 3 and variants)
     wz = (dthz[k] / dt - bgz) * sg
+    pdot = (p - p0) / dt if k > 1 else 0.0
     wil_up = wie_u + wel_u
     if az_mode == AZIMUTH_LEVEL:
         adot = -(wz - wil_up)
     elif az_mode == AZIMUTH_PROJECTED:
         adot = -(wz * cp * cr - wil_up)
     else:
-        pdot = (p - p0) / dt if k > 1 else 0.0
         adot = (pdot * np.sin(r) - (wz - wil_bz)) / (cp * cr)
     A = A0 + adot * dt
     if A < 0.0:
@@ -349,6 +349,7 @@ def riss_step(st, k, t, dthz, fx, fy, aod, vw, vbar, vod, par, gravity_model, az
     aux[5] = wil_bz
     aux[6] = vk
     aux[7] = wz
+    aux[8] = pdot
 
 
 @njit(cache=True)
@@ -365,7 +366,7 @@ def _riss_kernel(t, dthz, fx, fy, aod, vw, vbar, vod, st0, par, gravity_model, a
                  out):
     st = st0.copy()
     cols = np.empty((5, 3))
-    aux = np.empty(8)
+    aux = np.empty(9)
     riss_velocity(st, vod[0] / (1.0 + par[PAR_ODO_SCALE]))
     for j in range(9):
         out[0, j] = st[j]
