@@ -24,19 +24,23 @@ def _write(tmp_path, text, name="odo.csv"):
 
 def test_speed_units(tmp_path):
     p = _write(tmp_path, "time,speed\n0.0,36\n0.1,72\n0.2,0\n")
-    df = read_odometer(p, unit="km/h")
+    df = read_odometer(p, format="csv", unit="km/h")
     assert list(df.columns) == ["speed"] and df.index.name == "time"
     assert np.allclose(df.speed, [10.0, 20.0, 0.0])
-    assert np.allclose(read_odometer(p, unit="mph").speed, [36 * 0.44704, 72 * 0.44704, 0.0])
+    assert np.allclose(read_odometer(p, format="csv", unit="mph").speed,
+                       [36 * 0.44704, 72 * 0.44704, 0.0])
+    # a native table is SI by definition (the job file's ``kind`` names the quantity)
+    assert np.allclose(read_odometer(p, kind="speed").speed, [36.0, 72.0, 0.0])
 
 
 def test_distance_forms(tmp_path):
     p = _write(tmp_path, "t, ticks\n0, 0\n0.5, 500\n1.0, 1500\n", "enc.csv")
-    df = read_odometer(p, quantity="distance", unit="pulses", pulses_per_metre=100.0,
+    df = read_odometer(p, quantity="distance", format="csv", unit="pulses", pulses_per_metre=100.0,
                        time_column="t", value_column="ticks", cumulative=True)
     assert np.allclose(df.distance, [0.0, 5.0, 10.0])
     p2 = _write(tmp_path, "time,distance\n0,0\n1,0.012\n2,0.02\n", "km.csv")
-    assert np.allclose(read_odometer(p2, quantity="distance", unit="km").distance, [0, 12, 20])
+    assert np.allclose(read_odometer(p2, kind="distance", format="csv", unit="km").distance,
+                       [0, 12, 20])
 
 
 def test_round_trip_and_speed_to_distance(tmp_path):
@@ -77,11 +81,17 @@ def test_validation_errors_name_the_place(tmp_path, text, kwargs, exc, row, colu
 def test_units_must_be_declared(tmp_path):
     p = _write(tmp_path, "time,speed\n0,1\n1,1\n")
     with pytest.raises(UnitError):
-        read_odometer(p)
+        read_odometer(p, format="csv")
     with pytest.raises(UnitError):
-        read_odometer(p, unit="furlongs/fortnight")
+        read_odometer(p, format="csv", unit="furlongs/fortnight")
     with pytest.raises(UnitError):
-        read_odometer(p, quantity="distance", unit="pulses")
+        read_odometer(p, quantity="distance", format="csv", unit="pulses")
+    with pytest.raises(UnitError):
+        read_odometer(p, unit="km/h")  # native tables are SI
+    with pytest.raises(InputFormatError):
+        read_odometer(p, format="xlsx")
+    with pytest.raises(InputFormatError):
+        read_odometer(p, quantity="speed", kind="distance")
     with pytest.raises(InputFormatError):
         read_odometer(_write(tmp_path, "", "empty.csv"), unit="m/s")
     with pytest.raises(InputFormatError):

@@ -1094,3 +1094,64 @@ def _assemble_kernel(t, out_st, out_aux, seg, is_ep, ep_t, P_start, P_end, X_sta
                         var += P[ia, ib]
             out[k, 18 + i] = v
             out[k, 18 + npar + i] = np.sqrt(max(var, 0.0))
+
+
+# --- pipeline entry point ------------------------------------------------------------------------------
+def run_riss_job(job, inputs, windows, model, progress=None):
+    """Run a job with ``[filter] process_model = "riss"`` (called by
+    :func:`insgnss.pipeline.run_job`, which owns the job schema; imported lazily from there).
+
+    Same initialization, aiding measurements, evaluation and summary as the strapdown job; the
+    odometer table of the job is the RISS input (``aiding.odometer`` would use it twice and is
+    refused). Returns a :class:`insgnss.pipeline.JobResult`.
+    """
+    from .. import pipeline as pl
+
+    t_start = _time.perf_counter()
+    if inputs.odometer is None or not len(inputs.odometer):
+        raise ConfigError("the RISS process model needs an odometer (inputs.odometer.path or a "
+                          "simulated [odometer])", file=job.path, column="inputs.odometer.path")
+    if job["aiding"]["odometer"]:
+        raise ConfigError("with process_model = \"riss\" the odometer is the process input; "
+                          "switch aiding.odometer off", file=job.path, column="aiding.odometer")
+    init = pl.initialize(job, inputs, model)
+    odo = inputs.odometer
+    t_odo = odo.index.to_numpy(float)
+    imu = inputs.imu.loc[max(init.state.time, t_odo[0]):t_odo[-1]]
+    if len(imu) < 2:
+        raise ConfigError("the odometer does not overlap the IMU data", file=job.path,
+                          column="inputs.odometer.path")
+    state = init.state
+    if float(imu.index[0]) != state.time:
+        state = state.copy()
+        state.time = float(imu.index[0])
+    meas = pl.build_measurements(job, inputs, windows, imu)
+    cfg = pl.filter_config(job, model, init)
+    res = run_riss_filter(imu, odo, state, meas, cfg, RissConfig())
+    out = pl.JobResult(job, inputs, init, windows, res)
+    for name in ("forward", "smoothed"):
+        ev = pl.evaluate_solution(getattr(res, name), inputs, windows, job)
+        if ev:
+            out.evaluation[name] = ev
+    timing = dict(res.timing)
+    timing["job_total"] = _time.perf_counter() - t_start
+    name = job["job"]["name"]
+    if name == "job" and job.simulation.get("scenario", {}).get("name"):
+        name = job.simulation["scenario"]["name"]
+    r, p, h = state.euler
+    out.summary = {
+        "job": name, "source": inputs.source, "seed": inputs.seed, "process_model": "riss",
+        "complete": bool(res.complete), "error": None if res.error is None else str(res.error),
+        "imu_samples": int(len(imu)),
+        "initialization": {"method": init.method, "heading_source": init.heading_source,
+                           "time": state.time, "roll_deg": float(np.degrees(r)),
+                           "pitch_deg": float(np.degrees(p)), "heading_deg": float(np.degrees(h))},
+        "measurements": {m.name: int(len(m)) for m in meas},
+        "rejected": res.rejected.groupby("type").size().astype(int).to_dict()
+        if len(res.rejected) else {},
+        "outages": [list(w) for w in windows],
+        "imu_model": model.name,
+        "timing_s": timing,
+        "evaluation": {k: v["summary"] for k, v in out.evaluation.items()},
+    }
+    return out

@@ -7,7 +7,10 @@ Output table (insgnss convention): a DataFrame indexed by time [s] (name ``time`
   the first stamp, usually 0).
 
 Units are declared, never guessed: speed in ``m/s``, ``km/h``, ``mph`` or ``knots``; distance in
-``m``, ``km``, ``ft`` or ``pulses`` (with ``pulses_per_metre``). Distance may also be given as a
+``m``, ``km``, ``ft`` or ``pulses`` (with ``pulses_per_metre``). A *native* insgnss table
+(``format="native"``, the default: ``time`` + ``speed`` [m/s] or ``distance`` [m], as written by
+:func:`write_odometer` and ``insgnss simulate``) declares SI units by its format; a generic CSV
+(``format="csv"``) must declare ``unit``. Distance may also be given as a
 cumulative odometer reading (``cumulative=True``); it is then differenced. Every value is checked:
 missing columns, non-numeric cells, NaN/inf, non-increasing or duplicated time stamps, gaps longer
 than ``max_gap``, and speeds beyond ``max_speed`` (the usual symptom of km/h declared as m/s).
@@ -42,7 +45,9 @@ def _first_bad_row(mask: np.ndarray) -> int:
 def read_odometer(
     path: str | os.PathLike,
     *,
-    quantity: str = "speed",
+    quantity: str | None = None,
+    kind: str | None = None,
+    format: str = "native",
     unit: str | None = None,
     time_column: str = "time",
     value_column: str | None = None,
@@ -58,10 +63,14 @@ def read_odometer(
     ----------
     path : path
         CSV file with a header row.
-    quantity : {"speed", "distance"}
-        What the value column holds.
+    quantity, kind : {"speed", "distance"}
+        What the value column holds (``kind`` is the job-file name of the same setting;
+        default ``"speed"``).
+    format : {"native", "csv"}
+        ``native``: SI units by definition (``unit`` may be omitted, must be SI if given);
+        ``csv``: any column names and a declared ``unit``.
     unit : str
-        Declared unit (required): speed ``m/s km/h mph knots``; distance ``m km ft pulses``.
+        Declared unit: speed ``m/s km/h mph knots``; distance ``m km ft pulses``.
     time_column : str
         Name of the time column [s].
     value_column : str, optional
@@ -83,6 +92,17 @@ def read_odometer(
         Indexed by ``time`` [s], column ``speed`` [m/s] or ``distance`` [m].
     """
     path = Path(path)
+    if quantity is not None and kind is not None and quantity != kind:
+        raise InputFormatError("quantity and kind disagree", file=path, found=(quantity, kind))
+    quantity = quantity or kind or "speed"
+    if format not in ("native", "csv"):
+        raise InputFormatError("unknown odometer format", file=path, expected="'native' or 'csv'",
+                               found=repr(format))
+    if format == "native":
+        si = "m/s" if quantity == "speed" else "m"
+        if unit not in (None, si):
+            raise UnitError("a native odometer table is SI", file=path, expected=si, found=unit)
+        unit = si
     if quantity not in ("speed", "distance"):
         raise InputFormatError("unknown odometer quantity", file=path, expected="'speed' or "
                                "'distance'", found=repr(quantity))
