@@ -49,9 +49,12 @@ def make_case(hours: float, rate: float, seed: int = 0):
     return truth, imu, gnss, init, cfg
 
 
-def run_once(imu, gnss, init, cfg):
+def run_once(imu, gnss, init, cfg, cpu=False):
     t0 = time.perf_counter()
+    c0 = time.process_time()
     res = run_filter(imu, init, [GnssPosition(gnss), GnssVelocity(gnss)], cfg)
+    if cpu:
+        return time.perf_counter() - t0, time.process_time() - c0, res
     return time.perf_counter() - t0, res
 
 
@@ -130,11 +133,12 @@ def main(argv=None):
     truth, imu, gnss, init, cfg = make_case(a.hours, a.rate)
     t_data = time.perf_counter() - t0
     run_once(imu, gnss, init, cfg)  # loads the on-disk cache / compiles
-    walls = []
+    walls, cpus = [], []
     res = None
     for _ in range(3):
-        w, res = run_once(imu, gnss, init, cfg)
+        w, c, res = run_once(imu, gnss, init, cfg, cpu=True)
         walls.append(w)
+        cpus.append(c)
     wall = min(walls)
     n = len(imu)
     tm = res.timing
@@ -142,7 +146,9 @@ def main(argv=None):
           f"position + velocity, forward filter + RTS smoother (data generation {t_data:.1f} s)")
     if cold is not None:
         print(f"  cold first run (empty numba cache, compile included): {cold['wall']:.2f} s")
-    print(f"  warm total wall time: {wall:.2f} s  (runs: {', '.join(f'{w:.2f}' for w in walls)})")
+    print(f"  warm total wall time: {wall:.2f} s  (runs: {', '.join(f'{w:.2f}' for w in walls)}; "
+          f"process CPU time {min(cpus):.2f} s; load average {os.getloadavg()[0]:.1f} on "
+          f"{os.cpu_count()} cores)")
     print(f"  IMU samples/s: {n / wall:,.0f}")
     print("  split [s]: " + ", ".join(f"{k} {v:.3f}" for k, v in tm.items()))
     err = nav_errors(res.forward, truth)

@@ -58,7 +58,7 @@ def _run(t, dth, dv, pos, vel, C, pnom, n, i_sg, i_sa, t_end):
     Fint = np.zeros((200, n, n))
     Qint = np.zeros((200, 2, 3, 3))
     sub_dt = np.zeros(200)
-    out = (np.empty((N, 3)), np.empty((N, 3)), np.empty((N, 3, 3)), np.zeros(N, np.int64))
+    out = (np.empty((N, 9)), np.zeros(N, np.int64))
     _, _, ns = kernels.propagate_nominal(t, dth, dv, 1, 0.0, t_end, pos, vel, C, pnom, i_sg, i_sa,
                                          0, 0, 0.1, Fint, Qint, sub_dt, np.zeros(3), np.zeros(3),
                                          *out, 1, np.zeros((4, 3)))

@@ -26,13 +26,20 @@ epochs:
 Everything needed by the RTS smoother (:mod:`.smoother`) is stored per epoch.
 
 Health: non-finite ``x``/``P`` or a ``P`` that is not positive definite raises
-:class:`insgnss.errors.FilterHealthError` internally; :func:`run_filter` catches it and
-returns what was computed up to the last good epoch with ``complete=False``.
+:class:`insgnss.errors.FilterHealthError` internally; so does a *runaway NIS*: when, for one
+measurement type, the median normalized innovation ``NIS / dof`` (before gating, so rejected
+measurements count) over the last ``nis_window`` seconds exceeds ``nis_bound`` (at least
+``nis_min_count`` measurements in the window). A consistent filter has a median ``NIS / dof``
+below 1 (about 0.45-0.8 for 1-3 dof); a median beyond 25 means the measurements sit 5 sigma
+away most of the time, i.e. the filter has diverged or its noise model is badly wrong, and its
+solution should not be trusted silently. :func:`run_filter` catches the error and returns what
+was computed up to the last good epoch with ``complete=False``.
 """
 
 from __future__ import annotations
 
 import time as _time
+from collections import deque
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -48,7 +55,7 @@ from ..mechanization.strapdown import NavState, attitude_update_id
 from . import kernels
 from .measurements import Measurement, NominalState
 from .models import BIAS_MODELS, StateLayout, process_model
-from .smoother import STD_COLS, assemble_table, smooth
+from .smoother import STD_COLS, assemble_table, output_columns, smooth
 
 __all__ = ["BIAS_COLS", "STD_COLS", "FilterConfig", "FilterResult", "run_filter"]
 
@@ -100,6 +107,12 @@ class FilterConfig:
         Measurement times closer than this to an IMU sample are moved onto it [s].
     check_health : bool
         Check finiteness and positive definiteness at every epoch.
+    nis_window : float or None
+        Runaway-NIS window [s] (module docstring); ``None`` disables the check.
+    nis_bound : float
+        Largest allowed median ``NIS / dof`` over the window.
+    nis_min_count : int
+        Measurements of one type needed in the window before the check applies.
     """
 
     imu_model: ImuErrorModel | str = "tactical"
@@ -126,6 +139,9 @@ class FilterConfig:
     coning: bool = False
     snap_tolerance: float = 1e-6
     check_health: bool = True
+    nis_window: float | None = 30.0
+    nis_bound: float = 25.0
+    nis_min_count: int = 10
 
     def validate(self) -> None:
         if self.bias_model not in BIAS_MODELS:
@@ -138,6 +154,13 @@ class FilterConfig:
             v = getattr(self, key)
             if not (np.isfinite(v) and v > 0):
                 raise ConfigError("must be a positive number of seconds", column=key, found=v)
+        if self.nis_window is not None and not (np.isfinite(self.nis_window)
+                                                and self.nis_window > 0):
+            raise ConfigError("NIS window must be a positive number of seconds or None",
+                              column="nis_window", found=self.nis_window)
+        if not (self.nis_bound > 0):
+            raise ConfigError("NIS bound must be positive", column="nis_bound",
+                              found=self.nis_bound)
         for p in [self.gate_probability, *self.gate_probabilities.values()]:
             if p is not None and not (0.0 <= p < 1.0):
                 raise ConfigError("gating probability must be in [0, 1)", column="gate_probability",
@@ -197,10 +220,10 @@ class FilterResult:
 class _Store:
     """Per-run arrays shared by the engine, the smoother and the output assembly."""
 
-    def __init__(self, n_t, n_ep, n):
-        self.pos = np.empty((n_t, 3))
-        self.vel = np.empty((n_t, 3))
-        self.C = np.empty((n_t, 3, 3))
+    def __init__(self, n_t, n_ep, n, n_cols):
+        # the forward table itself: the kernel writes the nominal into columns 0-8, the
+        # output assembly the stds and parameters (no second copy of the trajectory)
+        self.nav = np.empty((n_t, n_cols))
         self.seg = np.zeros(n_t, np.int64)
         self.post = np.zeros(n_t, np.bool_)
         self.Pf = np.empty((n_ep, n, n))
@@ -259,17 +282,38 @@ def _inflate_for(P, H, R, z, thr):
     return P
 
 
-def _check(x, P, time, what):
-    """Raise FilterHealthError if x or P is non-finite or P is not positive definite."""
+def _check(x, P, time, what, full=True):
+    """Raise FilterHealthError if x or P is non-finite or (``full``) P is not positive definite."""
     if not np.isfinite(x.sum() + P.sum()):
         raise FilterHealthError(f"filter state became non-finite at t = {time:.6f} s ({what})",
                                 found="NaN/inf in x or P")
+    if not full:
+        return
     try:
         np.linalg.cholesky(P)
     except np.linalg.LinAlgError:
         raise FilterHealthError(
             f"covariance is not positive definite at t = {time:.6f} s ({what})",
             found="Cholesky factorisation failed") from None
+
+
+def _runaway_nis(hist: dict, name: str, time: float, nnis: float, config: FilterConfig) -> None:
+    """Record one normalized NIS and raise FilterHealthError when its window median runs away."""
+    q = hist.get(name)
+    if q is None:
+        q = hist[name] = deque()
+    q.append((time, nnis if np.isfinite(nnis) else np.inf))
+    while q and q[0][0] < time - config.nis_window:
+        q.popleft()
+    if len(q) < config.nis_min_count:
+        return
+    med = float(np.median([v for _, v in q]))
+    if med > config.nis_bound:
+        raise FilterHealthError(
+            f"runaway NIS at t = {time:.6f} s: the median NIS/dof of the {name!r} measurements over "
+            f"the last {config.nis_window:g} s is {med:.4g} (filter diverged or measurement noise "
+            "far too small)", column=name, expected=f"a median NIS/dof <= {config.nis_bound:g}",
+            found=f"{med:.4g} over {len(q)} measurements")
 
 
 def run_filter(
@@ -329,7 +373,7 @@ def run_filter(
     tol = min(config.snap_tolerance, 1e-3 * float(np.median(np.diff(t))))
     ep_t, ev_m, ev_r, ptr = _epoch_schedule(t, measurements, config.epoch_interval, tol)
     n_ep = ep_t.size
-    st = _Store(t.size, n_ep, n)
+    st = _Store(t.size, n_ep, n, len(output_columns(layout)))
     max_gap = float(np.max(np.diff(ep_t))) if n_ep > 1 else 0.0
     max_sub = min(int(np.ceil(max_gap / config.propagation_interval)),
                   int(np.ceil(max_gap / np.min(np.diff(t))))) + 3
@@ -359,11 +403,13 @@ def run_filter(
     gate_cache: dict = {}
     log = []  # (time, type, dof, nis, threshold, accepted, y, s)
     streak: dict = {}  # measurement type -> time of its first rejection since an acceptance
+    nis_hist: dict = {}  # measurement type -> deque of (time, NIS / dof) for the runaway check
+    nis_check = config.check_health and config.nis_window is not None
     recoveries: list = []
 
     timing = {"mechanization": 0.0, "covariance": 0.0, "updates": 0.0}
     j, frac = 1, 0.0
-    st.pos[0], st.vel[0], st.C[0] = pos, vel, C
+    kernels.store_nav(st.nav, 0, pos, vel, C)
     st.seg[0], st.post[0] = 0, True
     completed = -1
     error = None
@@ -381,7 +427,7 @@ def run_filter(
                 j, frac, n_sub = kernels.propagate_nominal(
                     t, dth, dv, j, frac, te, pos, vel, C, pnom, i_sg, i_sa, gmodel, aupd,
                     config.propagation_interval, Fint, Qint, sub_dt, pm.gyro_psd, pm.accel_psd,
-                    st.pos, st.vel, st.C, st.seg, e, rates)
+                    st.nav, st.seg, e, rates)
                 seg_dur = te - ep_t[e - 1]
                 if has_decay:
                     # the nominal of a Gauss-Markov parameter follows its mean, b' = -b / tau
@@ -394,7 +440,8 @@ def run_filter(
                         raise FilterHealthError(
                             f"nominal state became non-finite at t = {te:.6f} s (mechanization; "
                             "non-finite IMU data?)", found="NaN/inf in position/velocity/attitude")
-                    _check(x, P, te, "prediction")
+                    # full check (Cholesky) here only if no update follows at this epoch
+                    _check(x, P, te, "prediction", full=ptr[e + 1] == ptr[e])
                 c2 = perf()
                 timing["mechanization"] += c1 - c0
                 timing["covariance"] += c2 - c1
@@ -421,13 +468,17 @@ def run_filter(
                     if res is None:
                         continue
                     z, H, R = res
-                    z = np.atleast_1d(np.asarray(z, dtype=float))
-                    R = np.atleast_2d(np.asarray(R, dtype=float))
+                    if not (isinstance(z, np.ndarray) and z.ndim == 1):
+                        z = np.atleast_1d(np.asarray(z, dtype=float))
+                    if not (isinstance(R, np.ndarray) and R.ndim == 2):
+                        R = np.atleast_2d(np.asarray(R, dtype=float))
                     dof = z.size
                     # x is zero here (reset after the previous epoch), so y = z; every
                     # measurement of the epoch is gated against the predicted P
                     S = H @ P @ H.T + R
                     nis = kernels.nis(S, z)
+                    if nis_check:
+                        _runaway_nis(nis_hist, m.name, te, nis / dof, config)
                     p_gate = m.gate_probability
                     if p_gate is None:
                         p_gate = config.gate_probabilities.get(m.name, config.gate_probability)
@@ -482,7 +533,7 @@ def run_filter(
             st.pnom[e] = pnom
             # the IMU sample that sits on this epoch holds the post-feedback state
             if frac == 0.0 and t[j - 1] == te:
-                st.pos[j - 1], st.vel[j - 1], st.C[j - 1] = pos, vel, C
+                kernels.store_nav(st.nav, j - 1, pos, vel, C)
                 st.seg[j - 1], st.post[j - 1] = e, True
             completed = e
     except FilterHealthError as exc:

@@ -26,15 +26,48 @@ DISC_VANLOAN = 1
 
 
 @njit(cache=True)
+def store_nav(nav_out, j, pos, vel, C):
+    """Write position, velocity and the Euler angles of ``C`` into ``nav_out[j, 0:9]``."""
+    nav_out[j, 0] = pos[0]
+    nav_out[j, 1] = pos[1]
+    nav_out[j, 2] = pos[2]
+    nav_out[j, 3] = vel[0]
+    nav_out[j, 4] = vel[1]
+    nav_out[j, 5] = vel[2]
+    nav_out[j, 6] = np.arctan2(-C[2, 0], C[2, 2])
+    nav_out[j, 7] = np.arctan2(C[2, 1], np.sqrt(C[0, 1] ** 2 + C[1, 1] ** 2))
+    a = np.arctan2(C[0, 1], C[1, 1])
+    nav_out[j, 8] = a + 2.0 * np.pi if a < 0.0 else a
+
+
+@njit(cache=True)
+def _euler_dcm(r, p, a, C):
+    """``C_b^l = Rz(-A) Rx(p) Ry(r)`` (as :func:`insgnss.attitude.euler_to_dcm`) into ``C``."""
+    sr, cr = np.sin(r), np.cos(r)
+    sp, cp = np.sin(p), np.cos(p)
+    sa, ca = np.sin(a), np.cos(a)
+    C[0, 0] = ca * cr + sa * sp * sr
+    C[0, 1] = sa * cp
+    C[0, 2] = ca * sr - sa * sp * cr
+    C[1, 0] = -sa * cr + ca * sp * sr
+    C[1, 1] = ca * cp
+    C[1, 2] = -sa * sr - ca * sp * cr
+    C[2, 0] = -cp * sr
+    C[2, 1] = sp
+    C[2, 2] = cp * cr
+
+
+@njit(cache=True)
 def propagate_nominal(t, dth, dv, j, frac, t_end, pos, vel, C, pnom, i_sg, i_sa,
                       gravity_model, attitude_update, sub_T, Fint, Qint, sub_dt, q_g, q_a,
-                      out_pos, out_vel, out_C, out_seg, seg_id, rates):
+                      nav_out, out_seg, seg_id, rates):
     """Mechanize from the current point (row ``j``, share ``frac`` consumed) to ``t_end``.
 
     The nominal state ``pos, vel, C`` is advanced in place using the increments compensated
     with the current bias (and scale-factor) estimates held in ``pnom`` (the parameter part of
     the nominal state, error-state indices 9 onwards). Each completed row ``j`` is stored in
-    ``out_pos[j], out_vel[j], out_C[j]`` with ``out_seg[j] = seg_id``.
+    ``nav_out[j, 0:9]`` (NAV_COLS: lat lon height vel_e vel_n vel_u roll pitch heading) with
+    ``out_seg[j] = seg_id``.
 
     Over covariance sub-intervals of length ``sub_T`` (restarted at the segment start, the
     last one possibly shorter), ``Fint[s]`` receives ``int F dt``, ``Qint[s, 0 / 1]`` the
@@ -110,11 +143,7 @@ def propagate_nominal(t, dth, dv, j, frac, t_end, pos, vel, C, pnom, i_sg, i_sa,
                 rates[2, i] = dvc[i] / dt_s
         sum_dt += dt_s
         if full:
-            for i in range(3):
-                out_pos[j, i] = pos[i]
-                out_vel[j, i] = vel[i]
-                for k in range(3):
-                    out_C[j, i, k] = C[i, k]
+            store_nav(nav_out, j, pos, vel, C)
             out_seg[j] = seg_id
             j += 1
             frac = 0.0
@@ -469,48 +498,49 @@ def rts_backward(Pf, Pp, Phi, fb, n_ep, xs_plus, xs_minus, Ps):
 
 
 @njit(cache=True)
-def _euler_std(C, Pa):
+def _euler_std(C, Pa, J, out):
     """Std of roll, pitch, heading from the misalignment covariance ``Pa`` (3x3) at ``C``
-    (linearised: ``C_nom = (I + [phi x]) C``)."""
+    (linearised: ``C_nom = (I + [phi x]) C``), written into ``out``; ``J`` is scratch (3x3)."""
     # d roll = (C20 dC22 - C22 dC20) / (C20^2 + C22^2); dC = [phi x] C
     # dC20 = -phi_n C00 + phi_e C10 ; dC22 = -phi_n C02 + phi_e C12 ; dC21 = -phi_n C01 + phi_e C11
-    J = np.zeros((3, 3))
     d = C[2, 0] ** 2 + C[2, 2] ** 2
     if d < 1e-12:
         d = 1e-12
     J[0, 0] = (C[2, 0] * C[1, 2] - C[2, 2] * C[1, 0]) / d
     J[0, 1] = (-C[2, 0] * C[0, 2] + C[2, 2] * C[0, 0]) / d
+    J[0, 2] = 0.0
     cp = np.sqrt(max(1.0 - C[2, 1] ** 2, 1e-12))
     J[1, 0] = C[1, 1] / cp
     J[1, 1] = -C[0, 1] / cp
+    J[1, 2] = 0.0
     h = C[0, 1] ** 2 + C[1, 1] ** 2
     if h < 1e-12:
         h = 1e-12
     J[2, 0] = C[0, 1] * C[2, 1] / h
     J[2, 1] = C[1, 1] * C[2, 1] / h
     J[2, 2] = -1.0
-    out = np.empty(3)
     for r in range(3):
         v = 0.0
         for a in range(3):
             for b in range(3):
                 v += J[r, a] * Pa[a, b] * J[r, b]
         out[r] = np.sqrt(max(v, 0.0))
-    return out
 
 
 @njit(cache=True)
-def assemble_output(t, out_pos, out_vel, out_C, out_seg, out_post, ep_t, P_start, P_end,
-                    X_start, X_end, pnom_ep, n_rows, correct, out):
+def assemble_output(t, nav_in, out_seg, out_post, ep_t, P_start, P_end, X_start, X_end, pnom_ep,
+                    n_rows, correct, out):
     """IMU-rate output rows: nominal (optionally corrected) navigation state, stds, parameters.
 
-    Sample ``j`` belongs to segment ``e = out_seg[j]`` (``t[e-1] < t_j <= t[e]`` in epoch
-    times). If ``out_post[j]`` the sample sits on epoch ``e`` and holds the post-feedback
-    nominal: it takes ``X_start[e]``, ``P_start[e]``. Otherwise the error and covariance are
-    interpolated linearly in time between ``(X_start[e-1], P_start[e-1])`` at ``t[e-1]`` and
-    ``(X_end[e], P_end[e])`` at ``t[e]``; the parameter nominal is ``pnom_ep[e-1]``.
+    ``nav_in[j, 0:9]`` is the stored forward nominal (NAV_COLS). Sample ``j`` belongs to
+    segment ``e = out_seg[j]`` (``t[e-1] < t_j <= t[e]`` in epoch times). If ``out_post[j]`` the
+    sample sits on epoch ``e`` and holds the post-feedback nominal: it takes ``X_start[e]``,
+    ``P_start[e]``. Otherwise the error and covariance are interpolated linearly in time between
+    ``(X_start[e-1], P_start[e-1])`` at ``t[e-1]`` and ``(X_end[e], P_end[e])`` at ``t[e]``; the
+    parameter nominal is ``pnom_ep[e-1]``.
 
-    Forward run (``correct=False``, ``X`` unused): ``P_start = P(e|e)``, ``P_end = P(e|e-1)``.
+    Forward run (``correct=False``, ``X`` unused, ``out`` may be ``nav_in`` itself: columns 0-8
+    are then left as they are): ``P_start = P(e|e)``, ``P_end = P(e|e-1)``.
     Smoothed run: ``X_start = xs_plus``, ``X_end = xs_minus``, ``P_start = P_end = Ps``.
 
     ``out`` columns: lat lon height vel_e vel_n vel_u roll pitch heading, 9 stds (east north
@@ -519,17 +549,21 @@ def assemble_output(t, out_pos, out_vel, out_C, out_seg, out_post, ep_t, P_start
     """
     n = P_start.shape[1]
     npar = n - 9
-    x = np.empty(n)
+    x = np.zeros(n)
     pdiag = np.empty(n)
     Pa = np.empty((3, 3))
+    C = np.empty((3, 3))
     Cc = np.empty((3, 3))
     R = np.empty((3, 3))
     phi = np.empty(3)
+    J = np.empty((3, 3))
+    es = np.empty(3)
     for j in range(n_rows):
         e = out_seg[j]
         if out_post[j]:
             for a in range(n):
-                x[a] = X_start[e, a] if correct else 0.0
+                if correct:
+                    x[a] = X_start[e, a]
                 pdiag[a] = P_start[e, a, a]
             for a in range(3):
                 for b in range(3):
@@ -538,38 +572,37 @@ def assemble_output(t, out_pos, out_vel, out_C, out_seg, out_post, ep_t, P_start
         else:
             w = (t[j] - ep_t[e - 1]) / (ep_t[e] - ep_t[e - 1])
             for a in range(n):
-                x[a] = (1.0 - w) * X_start[e - 1, a] + w * X_end[e, a] if correct else 0.0
+                if correct:
+                    x[a] = (1.0 - w) * X_start[e - 1, a] + w * X_end[e, a]
                 pdiag[a] = (1.0 - w) * P_start[e - 1, a, a] + w * P_end[e, a, a]
             for a in range(3):
                 for b in range(3):
                     Pa[a, b] = (1.0 - w) * P_start[e - 1, 6 + a, 6 + b] + w * P_end[e, 6 + a, 6 + b]
             ep = e - 1
-        lat = out_pos[j, 0]
-        h = out_pos[j, 2]
-        M, N = radii(lat)
-        out[j, 0] = lat - x[1] / (M + h)
-        out[j, 1] = out_pos[j, 1] - x[0] / ((N + h) * np.cos(lat))
-        out[j, 2] = h - x[2]
-        for i in range(3):
-            out[j, 3 + i] = out_vel[j, i] - x[3 + i]
-            phi[i] = -x[6 + i]
+        _euler_dcm(nav_in[j, 6], nav_in[j, 7], nav_in[j, 8], C)
         if correct:
+            lat = nav_in[j, 0]
+            h = nav_in[j, 2]
+            M, N = radii(lat)
+            out[j, 0] = lat - x[1] / (M + h)
+            out[j, 1] = nav_in[j, 1] - x[0] / ((N + h) * np.cos(lat))
+            out[j, 2] = h - x[2]
+            for i in range(3):
+                out[j, 3 + i] = nav_in[j, 3 + i] - x[3 + i]
+                phi[i] = -x[6 + i]
             rotvec_to_dcm_nb(phi, R)
             for r in range(3):
                 for c in range(3):
-                    Cc[r, c] = (R[r, 0] * out_C[j, 0, c] + R[r, 1] * out_C[j, 1, c]
-                                + R[r, 2] * out_C[j, 2, c])
+                    Cc[r, c] = R[r, 0] * C[0, c] + R[r, 1] * C[1, c] + R[r, 2] * C[2, c]
+            out[j, 6] = np.arctan2(-Cc[2, 0], Cc[2, 2])
+            out[j, 7] = np.arctan2(Cc[2, 1], np.sqrt(Cc[0, 1] ** 2 + Cc[1, 1] ** 2))
+            hd = np.arctan2(Cc[0, 1], Cc[1, 1])
+            out[j, 8] = hd + 2.0 * np.pi if hd < 0.0 else hd
+            _euler_std(Cc, Pa, J, es)
         else:
-            for r in range(3):
-                for c in range(3):
-                    Cc[r, c] = out_C[j, r, c]
-        out[j, 6] = np.arctan2(-Cc[2, 0], Cc[2, 2])
-        out[j, 7] = np.arctan2(Cc[2, 1], np.sqrt(Cc[0, 1] ** 2 + Cc[1, 1] ** 2))
-        hd = np.arctan2(Cc[0, 1], Cc[1, 1])
-        out[j, 8] = hd + 2.0 * np.pi if hd < 0.0 else hd
+            _euler_std(C, Pa, J, es)
         for i in range(6):
             out[j, 9 + i] = np.sqrt(max(pdiag[i], 0.0))
-        es = _euler_std(Cc, Pa)
         for i in range(3):
             out[j, 15 + i] = es[i]
         for i in range(npar):

@@ -88,17 +88,21 @@ def output_columns(layout: StateLayout) -> list[str]:
 
 
 def assemble_table(t, store, ep_t, n_rows: int, layout: StateLayout, smoothed=None) -> pd.DataFrame:
-    """IMU-rate forward (``smoothed=None``) or smoothed (``(xs_plus, xs_minus, Ps)``) table."""
+    """IMU-rate forward (``smoothed=None``: completes ``store.nav`` in place) or smoothed
+    (``(xs_plus, xs_minus, Ps)``: a new table from the forward nominal) table."""
     n = layout.n
     cols = output_columns(layout)
-    out = np.empty((n_rows, len(cols)))
-    if n_rows:
-        if smoothed is None:
+    if smoothed is None:
+        out = store.nav
+        if n_rows:
             X = np.zeros((1, n))  # unused: no correction
-            kernels.assemble_output(t, store.pos, store.vel, store.C, store.seg, store.post, ep_t,
-                                    store.Pf, store.Pp, X, X, store.pnom, n_rows, False, out)
-        else:
+            kernels.assemble_output(t, store.nav, store.seg, store.post, ep_t, store.Pf, store.Pp,
+                                    X, X, store.pnom, n_rows, False, out)
+    else:
+        out = np.empty((n_rows, len(cols)))
+        if n_rows:
             xs_plus, xs_minus, Ps = smoothed
-            kernels.assemble_output(t, store.pos, store.vel, store.C, store.seg, store.post, ep_t,
-                                    Ps, Ps, xs_plus, xs_minus, store.pnom, n_rows, True, out)
-    return pd.DataFrame(out, index=pd.Index(t[:n_rows], name="time"), columns=cols, copy=False)
+            kernels.assemble_output(t, store.nav, store.seg, store.post, ep_t, Ps, Ps, xs_plus,
+                                    xs_minus, store.pnom, n_rows, True, out)
+    return pd.DataFrame(out[:n_rows], index=pd.Index(t[:n_rows], name="time"), columns=cols,
+                        copy=False)
