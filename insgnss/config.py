@@ -56,8 +56,12 @@ SCHEMA: dict[str, Any] = {
             "rate_hz": _spec(_NUM, None, "declared IMU rate (checked)"),
             "delimiter": _spec(str, ","),
             "header": _spec(bool, True),
-            "gap_policy": _spec(str, "bridge", choices=["bridge", "error", "split"]),
-            "max_gap": _spec(_NUM, 1.0, "longest gap bridged [s]"),
+            "gap_policy": _spec(str, "error", "gaps longer than max_gap: stop the run, bridge "
+                                "them, or process the segments separately (docs/jobs.md, "
+                                "Robustness)", choices=["error", "bridge", "split"]),
+            "max_gap": _spec(_NUM, 1.0, "longest gap bridged with a warning [s]"),
+            "duplicates": _spec(str, "drop", "repeated time stamps: drop with a warning (first "
+                                "kept) or stop", choices=["drop", "error"]),
         },
         "gnss": {
             "format": _spec(str, "rtklib_pos", choices=["rtklib_pos", "nmea", "kfgins", "native"]),
@@ -66,6 +70,8 @@ SCHEMA: dict[str, Any] = {
             "time_offset": _spec(_NUM, 0.0, "added to the GNSS time [s]"),
             "use_velocity": _spec(bool, False, "also use the velocity columns"),
             "date": _spec(str, None, "date for NMEA without RMC (YYYY-MM-DD)"),
+            "duplicates": _spec(str, "drop", "repeated epochs: drop with a warning (first kept) "
+                                "or stop", choices=["drop", "error"]),
         },
         "odometer": {
             "format": _spec(str, "native", choices=["native", "csv"]),
@@ -143,8 +149,17 @@ SCHEMA: dict[str, Any] = {
         "propagation_interval": _spec(_NUM, 0.1),
         "epoch_interval": _spec(_NUM, 1.0),
         "discretization": _spec(str, "second_order", choices=["second_order", "vanloan"]),
-        "gate_probability": _spec(_NUM, 0.9999),
-        "bias_model": _spec(str, "gauss_markov",
+        "gate_probability": _spec(_NUM, 0.9999, "chi-square gate of every measurement (0: off)"),
+        "gate_recovery": _spec(_NUM, 5.0, "after this many seconds of continuous rejection of "
+                               "one measurement type the covariance is inflated and the "
+                               "measurement accepted [s] (0: never)"),
+        "nis_window": _spec(_NUM, 30.0, "runaway-NIS check window [s] (0: off)"),
+        "nis_bound": _spec(_NUM, 25.0, "stop when the window median of NIS/dof of one "
+                           "measurement type exceeds this"),
+        "bias_model": _spec(str, "random_walk", "random_walk: turn-on bias + random walk "
+                            "from the instability (robust); gauss_markov: the whole bias is a "
+                            "zero-mean first-order GM process (only after a calibration removed "
+                            "the turn-on bias)",
                             choices=["gauss_markov", "random_walk", "random_constant"]),
         "scale_factors": _spec(bool, False),
         "smoother": _spec(bool, True),

@@ -90,3 +90,24 @@ def test_outputs_never_overwrite_inputs(tmp_path, drive_result, monkeypatch):
     with pytest.raises(ConfigError, match="refusing to overwrite an input"):
         write_outputs(drive_result, tmp_path)
     assert victim.read_text() == "precious input\n"
+
+
+def test_bundled_demo_runs_end_to_end(tmp_path):
+    """The README's main command: simulate the car scenario and process it."""
+    from insgnss.cli import main
+
+    out = tmp_path / "demo"
+    assert main(["demo", "-o", str(out), "--no-progress"]) == 0
+    s = json.loads((out / "summary.json").read_text())
+    assert s["complete"] and s["source"] == "simulation"
+    fwd, smo = s["evaluation"]["forward"], s["evaluation"]["smoothed"]
+    assert fwd["n_outages"] == 2
+    # 1.5 m GNSS: aided error well below it; MEMS dead reckoning over 30 s outages stays bounded
+    assert fwd["non_outage_rms_h_m"] < 1.0 and smo["non_outage_rms_h_m"] < 0.7
+    assert fwd["end_h_err_m_mean"] < 15.0
+    # the smoother removes most of the in-outage drift
+    assert smo["rms_h_err_m_mean"] < 0.4 * fwd["rms_h_err_m_mean"]
+    html = (out / "report.html").read_text()
+    assert html.count("data:image/png;base64,") >= 4
+    for name in ("forward.csv", "smoothed.csv", "forward.kml", "smoothed.geojson"):
+        assert (out / name).stat().st_size > 0
