@@ -48,7 +48,11 @@ Post-processing of the raw decisions (all in compiled per-sample loops):
 - **minimum motion**: motion segments shorter than ``min_motion`` [s] between two still
   segments are treated as still (fills one-sample drop-outs inside a stance);
 - **minimum stance**: still segments shorter than ``min_stance`` [s] are discarded (no ZUPT on a
-  fleeting dip of the statistic in mid-swing).
+  fleeting dip of the statistic in mid-swing);
+- **margin**: every still segment is then shortened by ``margin`` [s] at both ends. A centred
+  window sees the start of a motion only once half of it covers the motion, so the raw decision
+  overhangs the motion by up to half a window; a vehicle that pulls away smoothly would get
+  ZUPTs while it already moves.
 
 The result is a :class:`Stillness` holding the boolean series, the statistic and the
 threshold used, all as pandas Series indexed by time.
@@ -291,6 +295,28 @@ def fill_short_runs(flags, value, min_len):
 
 
 @njit(cache=True)
+def shrink_runs(flags, n):
+    """Shorten every still run by ``n`` samples at both ends (runs of ``2n`` or fewer vanish);
+    runs touching the start or the end of the record are not shortened there."""
+    m = flags.shape[0]
+    out = flags.copy()
+    k = 0
+    while k < m:
+        if flags[k]:
+            j = k
+            while j < m and flags[j]:
+                j += 1
+            a = k + n if k > 0 else k
+            b = j - n if j < m else j
+            for i in range(k, j):
+                out[i] = a <= i < b
+            k = j
+        else:
+            k += 1
+    return out
+
+
+@njit(cache=True)
 def drop_short_runs(flags, min_len):
     """Clear still runs (``True``) shorter than ``min_len`` samples, including runs at the ends."""
     n = flags.shape[0]
@@ -334,6 +360,8 @@ class DetectorConfig:
         Exit threshold / entry threshold (>= 1).
     min_stance, min_motion : float
         Minimum still-segment duration and the longest motion gap filled as still [s].
+    margin : float
+        Still segments are shortened by this at both ends [s] (after the other steps).
     adapt_window : float
         ``adaptive``: length ``2h`` of the window of the valley and peak levels [s].
     adapt_factor, adapt_peak_ratio, adapt_gait_peak : float
@@ -354,6 +382,7 @@ class DetectorConfig:
     hysteresis: float = 1.0
     min_stance: float = 0.0
     min_motion: float = 0.0
+    margin: float = 0.0
     adapt_window: float = 3.0
     adapt_factor: float = 10.0
     adapt_peak_ratio: float = 100.0
@@ -373,6 +402,8 @@ class DetectorConfig:
             raise ConfigError("hysteresis must be >= 1", column="hysteresis", found=self.hysteresis)
         if self.min_stance < 0 or self.min_motion < 0:
             raise ConfigError("minimum durations must be >= 0", column="min_stance")
+        if self.margin < 0:
+            raise ConfigError("margin must be >= 0", column="margin", found=self.margin)
 
     @classmethod
     def from_dict(cls, d: dict) -> DetectorConfig:
@@ -479,6 +510,8 @@ def decide(t, stat, thr, config: DetectorConfig) -> np.ndarray:
         still = fill_short_runs(still, False, sample_count(config.min_motion, dt) + 1)
     if config.min_stance > 0:
         still = drop_short_runs(still, sample_count(config.min_stance, dt))
+    if config.margin > 0:
+        still = shrink_runs(still, sample_count(config.margin, dt))
     return still
 
 

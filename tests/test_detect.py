@@ -21,6 +21,7 @@ from insgnss.detect import (
     running_max,
     running_min,
     shoe_statistic,
+    shrink_runs,
 )
 from insgnss.errors import ConfigError
 from insgnss.imu import increments_table, rates_table, trapezoid_increments
@@ -100,6 +101,19 @@ def test_short_run_filters():
     # interior motion gaps shorter than 2 filled; the leading gap is not interior
     np.testing.assert_array_equal(fill_short_runs(f, False, 2),
                                   [0, 1, 1, 1, 1, 1, 1, 1, 0, 0, 1, 1, 1, 1])
+
+
+def test_shrink_runs_margin():
+    f = np.array([1, 1, 1, 0, 0, 1, 1, 1, 1, 1, 0, 1, 1, 0, 1, 1, 1], bool)
+    # interior runs lose 1 sample at both ends; runs touching the record ends keep that end
+    np.testing.assert_array_equal(shrink_runs(f, 1),
+                                  [1, 1, 0, 0, 0, 0, 1, 1, 1, 0, 0, 0, 0, 0, 0, 1, 1])
+    cfg = DetectorConfig(method="are", window=0.01, threshold=0.5, margin=0.02)
+    t = np.arange(f.size) * 0.01
+    w = np.where(f[:, None], 0.0, 2.0) * np.ones((1, 3))
+    a = np.tile([0.0, 0.0, G], (f.size, 1))
+    still, _, _ = detect_arrays(t, w, a, cfg)
+    np.testing.assert_array_equal(still, shrink_runs(f, 2))
 
 
 def test_quiet_runs_and_gait_adaptive_threshold():

@@ -7,6 +7,7 @@ import sys
 from pathlib import Path
 
 import numpy as np
+import pandas as pd
 import pytest
 
 from insgnss.attitude import euler_to_dcm, skew, wrap_pi
@@ -208,6 +209,31 @@ def _load(path: Path, name: str):
     mod = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(mod)
     return mod
+
+
+def test_pyshoe_converter_round_trip(pyshoe_dir, tmp_path):
+    sys.path.insert(0, str(REPO / "scenarios" / "pyshoe"))
+    try:
+        convert = _load(REPO / "scenarios" / "pyshoe" / "convert.py", "pyshoe_convert")
+    finally:
+        sys.path.pop(0)
+    mat = pyshoe_dir / "2017-11-22-11-27-30.mat"
+    raw = convert.load_mat(mat)
+    imu, truth = convert.to_insgnss(raw)
+    # at rest the body (RFU) specific force points up: z is the largest, positive component
+    f0 = imu[["accel_x", "accel_y", "accel_z"]].iloc[:100].mean().to_numpy()
+    assert f0[2] > 9.0 and np.linalg.norm(f0) == pytest.approx(9.82, abs=0.05)
+    # the Vicon height is kept (z up: the foot rises in the swings)
+    np.testing.assert_array_equal(truth["z"].to_numpy(), raw["gt"][:, 2])
+    imu_csv, truth_csv = convert.write_trial(mat, tmp_path / "trial")
+    back = convert.write_mat(imu_csv, truth_csv, tmp_path / "back.mat")
+    b = convert.load_mat(back)
+    np.testing.assert_allclose(b["ts"], raw["ts"], rtol=0, atol=1e-12)
+    np.testing.assert_allclose(b["imu"], raw["imu"], rtol=1e-12, atol=1e-12)
+    np.testing.assert_allclose(b["gt"], raw["gt"], rtol=1e-12, atol=1e-12)
+    xyz = convert.solution_xyz(pd.DataFrame({"east": [1.0, 2.0], "north": [3.0, 5.0],
+                                             "up": [0.0, 1.0]}))
+    np.testing.assert_array_equal(xyz.to_numpy(), [[0, 0, 0], [1, 2, 1]])
 
 
 #: walking (x2), running and a slow-motion trial; with the one fixed preset

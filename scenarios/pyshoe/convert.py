@@ -15,10 +15,22 @@ The declared axis map to insgnss' body frame (right-forward-up) is
 same permutation as RFU <-> FRD). Which way the sensor x axis points on the shoe does not
 matter for ZUPT navigation: heading is unobservable and the scorer aligns yaw.
 
+Truth frame: the Vicon ``gt`` has z up (the foot rises in the swings) but its (x, y, z) triad is
+the mirror image of the IMU's world: a trajectory navigated in a right-handed frame matches it
+only after a reflection (PyShoe navigates in a z-down frame and compares its (x, y) with the
+Vicon's directly, which is the same reflection). The declared truth map to a right-handed
+local-level frame (z up) swaps x and y::
+
+    truth = TRUTH_MAP @ gt,   TRUTH_MAP = [[0, 1, 0], [1, 0, 0], [0, 0, 1]]   (det = -1)
+
+so insgnss' east/north/up solutions compare with the converted truth up to a yaw rotation, and
+the scorer's own frame is obtained back by the same swap (``x = north, y = east``).
+
 Conversions:
 
 - ``to_insgnss(mat) -> (imu, truth)``: IMU rate table (``gyro_* accel_*``, body RFU) and a truth
-  table with columns ``x y z`` [m] (Vicon frame), both indexed by time [s];
+  table with columns ``x y z`` [m] (right-handed, z up: ``TRUTH_MAP @ gt``), both indexed by
+  time [s];
 - ``write_trial(mat, out_dir)``: ``imu.csv`` and ``truth.csv`` as native insgnss tables;
 - ``from_insgnss(imu, truth) -> dict``: the ``.mat`` keys ``ts imu gt`` back (sensor frame);
   ``write_mat(imu_csv, truth_csv, path)`` writes them with scipy;
@@ -47,6 +59,7 @@ from insgnss.imu import ACCEL_COLS, GYRO_COLS, rates_table
 from insgnss.io.native import atomic_write, read_table, write_table
 
 AXIS_MAP = np.array([[0.0, 1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, -1.0]])
+TRUTH_MAP = np.array([[0.0, 1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]])
 #: the lab (University of Toronto, STARS Lab); approximate, used only for normal gravity
 TORONTO = (np.radians(43.66), np.radians(-79.40), 100.0)
 TRUTH_COLS = ["x", "y", "z"]
@@ -80,7 +93,8 @@ def to_insgnss(mat: dict | str | Path) -> tuple[pd.DataFrame, pd.DataFrame]:
     acc = d["imu"][:, :3] @ AXIS_MAP.T
     gyro = d["imu"][:, 3:] @ AXIS_MAP.T
     imu = rates_table(d["ts"], gyro, acc)
-    truth = pd.DataFrame(d["gt"], index=pd.Index(d["ts"], name="time"), columns=TRUTH_COLS)
+    truth = pd.DataFrame(d["gt"] @ TRUTH_MAP.T, index=pd.Index(d["ts"], name="time"),
+                         columns=TRUTH_COLS)
     return imu, truth
 
 
@@ -89,15 +103,15 @@ def from_insgnss(imu: pd.DataFrame, truth: pd.DataFrame) -> dict:
     acc = imu[ACCEL_COLS].to_numpy(float) @ AXIS_MAP  # AXIS_MAP is orthogonal: inverse = T
     gyro = imu[GYRO_COLS].to_numpy(float) @ AXIS_MAP
     return {"ts": np.asarray(imu.index, float)[None, :], "imu": np.column_stack([acc, gyro]),
-            "gt": truth[TRUTH_COLS].to_numpy(float)}
+            "gt": truth[TRUTH_COLS].to_numpy(float) @ TRUTH_MAP}  # TRUTH_MAP is its own inverse
 
 
 def write_trial(mat: str | Path, out_dir: str | Path) -> tuple[Path, Path]:
     """Convert one trial into ``out_dir/imu.csv`` and ``out_dir/truth.csv``."""
     imu, truth = to_insgnss(mat)
     out = Path(out_dir)
-    return (write_table(imu, out / "imu.csv", float_format="%.10g"),
-            write_table(truth, out / "truth.csv", float_format="%.10g"))
+    return (write_table(imu, out / "imu.csv"),
+            write_table(truth, out / "truth.csv"))
 
 
 def write_mat(imu_csv: str | Path, truth_csv: str | Path, path: str | Path) -> Path:
@@ -107,7 +121,8 @@ def write_mat(imu_csv: str | Path, truth_csv: str | Path, path: str | Path) -> P
 
 
 def solution_xyz(traj: pd.DataFrame, origin: tuple[float, float, float] | None = None) -> pd.DataFrame:
-    """The scorer's ``x y z`` [m] (ENU from the first sample) from a trajectory table."""
+    """``x y z`` = east, north, up [m] from the first sample, in the frame of the converted
+    truth (see ``TRUTH_MAP``; the scorer's frame is ``x = north, y = east``)."""
     if {"east", "north", "up"} <= set(traj.columns):
         xyz = traj[["east", "north", "up"]].to_numpy(float)
     else:
