@@ -307,7 +307,9 @@ def _runaway_nis(hist: dict, name: str, time: float, nnis: float, config: Filter
         q.popleft()
     if len(q) < config.nis_min_count:
         return
-    med = float(np.median([v for _, v in q]))
+    vals = sorted(v for _, v in q)  # exact median; sorted() beats np.median on ~30 values
+    k = len(vals) // 2
+    med = vals[k] if len(vals) % 2 else 0.5 * (vals[k - 1] + vals[k])
     if med > config.nis_bound:
         raise FilterHealthError(
             f"runaway NIS at t = {time:.6f} s: the median NIS/dof of the {name!r} measurements over "

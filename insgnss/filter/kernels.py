@@ -184,7 +184,24 @@ def nis(S, y):
     return out
 
 
-# --- small dense linear algebra (explicit loops: fast for n <= 30 and quick to compile) ---------
+# --- small dense linear algebra (explicit loops: fast for n <= 30 and quick to compile; slice
+# assignments such as ``A[:, :] = B`` are avoided on purpose: each costs seconds of compilation)
+@njit(cache=True)
+def _copy(src, dst):
+    """``dst[...] = src`` for 2-D arrays of equal shape."""
+    for i in range(src.shape[0]):
+        for k in range(src.shape[1]):
+            dst[i, k] = src[i, k]
+
+
+@njit(cache=True)
+def _fill(a, v):
+    """``a[...] = v`` for a 2-D array."""
+    for i in range(a.shape[0]):
+        for k in range(a.shape[1]):
+            a[i, k] = v
+
+
 @njit(cache=True)
 def _mm(A, B, out):
     """``out = A @ B`` (out must not alias A or B)."""
@@ -231,7 +248,7 @@ def _sparse(A, ri, ci, vals):
 @njit(cache=True)
 def _spmm(ri, ci, vals, nnz, X, out):
     """``out = A @ X`` for sparse A given by its entries."""
-    out[:, :] = 0.0
+    _fill(out, 0.0)
     p = X.shape[1]
     for q in range(nnz):
         i, j, a = ri[q], ci[q], vals[q]
@@ -242,7 +259,7 @@ def _spmm(ri, ci, vals, nnz, X, out):
 @njit(cache=True)
 def _mmspt(X, ri, ci, vals, nnz, out):
     """``out = X @ A^T`` for sparse A given by its entries."""
-    out[:, :] = 0.0
+    _fill(out, 0.0)
     m = X.shape[0]
     for q in range(nnz):
         r, c, a = ri[q], ci[q], vals[q]
@@ -264,9 +281,15 @@ def expm_nb(A):
     sq = 0
     if nrm > 0.5:
         sq = int(np.ceil(np.log2(nrm / 0.5)))
-    X = A / (2.0**sq)
-    E = np.eye(n) + X
-    term = X.copy()
+    scale = 1.0 / 2.0**sq
+    X = np.empty((n, n))
+    E = np.empty((n, n))
+    term = np.empty((n, n))
+    for i in range(n):
+        for k in range(n):
+            X[i, k] = A[i, k] * scale
+            E[i, k] = X[i, k] + (1.0 if i == k else 0.0)
+            term[i, k] = X[i, k]
     tmp = np.empty((n, n))
     for k in range(2, 20):
         _mm(term, X, tmp)
@@ -280,7 +303,7 @@ def expm_nb(A):
             break
     for _ in range(sq):
         _mm(E, E, tmp)
-        E[:, :] = tmp
+        _copy(tmp, E)
     return E
 
 
@@ -363,13 +386,13 @@ def discretize(Fint, Qint, sub_dt, n_sub, decay, qdiag, method, Phi_tot, Qd_tot)
                 Qd[r, c] = v
                 Qd[c, r] = v
         if first:
-            Phi_tot[:, :] = Phi
-            Qd_tot[:, :] = Qd
+            _copy(Phi, Phi_tot)
+            _copy(Qd, Qd_tot)
             first = False
         else:
             npf = _sparse(Phi, ri, ci, vals)
             _spmm(ri, ci, vals, npf, Phi_tot, tmp)
-            Phi_tot[:, :] = tmp
+            _copy(tmp, Phi_tot)
             _spmm(ri, ci, vals, npf, Qd_tot, tmp)
             _mmspt(tmp, ri, ci, vals, npf, A)
             for r in range(n):
@@ -402,7 +425,7 @@ def apply_feedback(pos, vel, C, pnom, x):
     rotvec_to_dcm_nb(phi, R)
     Cn = np.empty((3, 3))
     _mm(R, C, Cn)
-    C[:, :] = Cn
+    _copy(Cn, C)
     for i in range(pnom.shape[0]):
         pnom[i] -= x[9 + i]
 
@@ -462,16 +485,20 @@ def rts_backward(Pf, Pp, Phi, fb, n_ep, xs_plus, xs_minus, Ps):
     D = np.empty((n, n))
     T1 = np.empty((n, n))
     bad = 0
-    xs_plus[n_ep - 1, :] = 0.0
-    Ps[n_ep - 1] = Pf[n_ep - 1]
-    xs_minus[n_ep - 1] = fb[n_ep - 1]
+    for i in range(n):
+        xs_plus[n_ep - 1, i] = 0.0
+        xs_minus[n_ep - 1, i] = fb[n_ep - 1, i]
+        for k in range(n):
+            Ps[n_ep - 1, i, k] = Pf[n_ep - 1, i, k]
     for e in range(n_ep - 2, -1, -1):
         # A^T = Pp^-1 (Phi Pf)   (Pf, Pp symmetric)
         _mm(Phi[e + 1], Pf[e], B)
         if not _chol_solve(Pp[e + 1], B, L, At):
             bad += 1
-            xs_plus[e, :] = 0.0
-            Ps[e] = Pf[e]
+            for i in range(n):
+                xs_plus[e, i] = 0.0
+                for k in range(n):
+                    Ps[e, i, k] = Pf[e, i, k]
         else:
             for i in range(n):
                 v = 0.0
