@@ -37,6 +37,7 @@ from .filter.measurements import BodyVelocity, Cupt, GnssPosition, GnssVelocity,
 from .imu import ACCEL_COLS, GYRO_COLS, ImuErrorModel, grade
 from .mechanization.strapdown import NavState, mechanize
 from .outages import in_windows, periodic_windows
+from .policies import check_imu_table, gap_policy, run_segments, shift_report
 from .preprocess import estimate_time_offset, shift_time, with_static_noise
 from .validate import check_gnss_in_imu_span
 
@@ -97,15 +98,17 @@ def _read_imu(job: Job) -> pd.DataFrame:
                               file=job.path, column="inputs.imu.mounting_deg")
         return read_rtklibexplorer_imu(path, mounting_rpy_deg=spec["mounting_deg"],
                                        tag_path=job.resolve(spec["tag"]),
-                                       time_offset=spec["time_offset"], rate_hz=spec["rate_hz"])
+                                       time_offset=spec["time_offset"], rate_hz=spec["rate_hz"],
+                                       gap_policy=gap_policy(job),
+                                       duplicates=spec["duplicates"])
     if fmt == "kfgins":
         from .io.kfgins import read_kfgins_imu
 
-        return read_kfgins_imu(path)
+        return read_kfgins_imu(path, gap_policy=gap_policy(job), duplicates=spec["duplicates"])
     if fmt == "native":
         from .io.tracks import read_trajectory_csv
 
-        return read_trajectory_csv(path, required=())
+        return read_trajectory_csv(path, required=(), duplicates=spec["duplicates"])
     from .io.imu_csv import read_imu_csv
 
     return read_imu_csv(path, columns=spec["columns"], gyro_unit=spec["gyro_unit"],
@@ -113,7 +116,8 @@ def _read_imu(job: Job) -> pd.DataFrame:
                         time_offset=spec["time_offset"], axis_map=spec["axis_map"],
                         mounting_euler_deg=spec["mounting_deg"], sensor_axes=spec["sensor_axes"],
                         euler_convention=spec["mounting_convention"], rate_hz=spec["rate_hz"],
-                        delimiter=spec["delimiter"], header=spec["header"])
+                        delimiter=spec["delimiter"], header=spec["header"],
+                        gap_policy=gap_policy(job), duplicates=spec["duplicates"])
 
 
 def _read_gnss(job: Job) -> pd.DataFrame | None:
@@ -125,19 +129,19 @@ def _read_gnss(job: Job) -> pd.DataFrame | None:
     if fmt == "rtklib_pos":
         from .io.rtklib import read_rtklib_pos
 
-        g = read_rtklib_pos(path)
+        g = read_rtklib_pos(path, duplicates=spec["duplicates"])
     elif fmt == "nmea":
         from .io.nmea import read_nmea
 
-        g = read_nmea(path, date=spec["date"])
+        g = read_nmea(path, date=spec["date"], duplicates=spec["duplicates"])
     elif fmt == "kfgins":
         from .io.kfgins import read_kfgins_gnss
 
-        g = read_kfgins_gnss(path)
+        g = read_kfgins_gnss(path, duplicates=spec["duplicates"])
     else:
         from .io.tracks import read_trajectory_csv
 
-        g = read_trajectory_csv(path)
+        g = read_trajectory_csv(path, duplicates=spec["duplicates"])
     if spec["time_offset"]:
         g = g.set_axis(g.index + spec["time_offset"], axis=0)
     return g
@@ -486,6 +490,8 @@ def filter_config(job: Job, model: ImuErrorModel, init: Initialization) -> Filte
         discretization=f["discretization"], gate_probability=f["gate_probability"] or None,
         smoother=f["smoother"], initial_pos_std=init.pos_std, initial_vel_std=init.vel_std,
         initial_att_std=init.att_std, coning=f["coning"],
+        gate_recovery=f["gate_recovery"] or None, nis_window=f["nis_window"] or None,
+        nis_bound=f["nis_bound"],
         gyro_bias=None if init.gyro_bias is None else tuple(init.gyro_bias))
 
 
@@ -532,14 +538,25 @@ def run_job(job: Job, *, progress: bool | None = None, seed: int | None = None,
     t_start = _time.perf_counter()
     inputs = load_inputs(job, seed) if inputs is None else inputs
     t_read = _time.perf_counter() - t_start
+    # duplicates, gaps and segments of the table actually processed (policies.py)
+    inputs.imu, imu_report = check_imu_table(inputs.imu, gap_policy(job),
+                                             job["inputs"]["imu"]["duplicates"])
     model = inputs.imu_model or _imu_model(job, None)
     windows = outage_windows(job, inputs.gnss)
     preprocessing = {}
     if job["inputs"]["imu"]["estimate_time_offset"] and inputs.gnss is not None:
         dt, info = estimate_time_offset(inputs.imu, inputs.gnss, windows)
         inputs.imu = shift_time(inputs.imu, dt)
+        imu_report = shift_report(imu_report, dt)
+        inputs.imu.attrs.update({k: imu_report[k] for k in ("gaps", "segments",
+                                                            "dropped_duplicates")})
         preprocessing["imu_time_offset_estimated_s"] = dt
         preprocessing["imu_time_offset_info"] = info
+    if len(imu_report["segments"]) > 1:  # gap_policy = "split" and long gaps
+        out = run_segments(job, inputs, windows, imu_report["segments"], progress=progress,
+                           preprocessing=preprocessing)
+        out.summary["imu"] = imu_report
+        return out
     if job["filter"]["process_model"] == "riss":
         return _run_riss(job, inputs, windows, model, progress)
     init = initialize(job, inputs, model)
@@ -566,7 +583,8 @@ def run_job(job: Job, *, progress: bool | None = None, seed: int | None = None,
     out.summary = {
         "job": name, "source": inputs.source, "seed": inputs.seed,
         "complete": bool(res.complete), "error": None if res.error is None else str(res.error),
-        "imu_samples": int(len(imu)), "initialization": {
+        "stopped_at": None if res.complete else float(res.final.time),
+        "imu_samples": int(len(imu)), "imu": imu_report, "initialization": {
             "method": init.method, "heading_source": init.heading_source,
             "time": init.state.time,
             "roll_deg": float(np.degrees(init.state.euler[0])),
@@ -597,74 +615,85 @@ def _run_riss(job, inputs, windows, model, progress):
 
 
 # --- outputs ----------------------------------------------------------------------------------------
+#: every file name write_outputs may produce (a previous run's files that a new run does not
+#: produce are removed when the new set is committed, so a folder never mixes two runs)
+OUTPUT_NAMES = tuple(
+    [f"{t}{ext}" for t in ("forward", "smoothed")
+     for ext in (".csv", ".nav", ".kml", ".geojson", "_eval.csv")]
+    + ["innovations.csv", "rejected.csv", "outages_forward.csv", "outages_smoothed.csv",
+       "summary.json", "report.html"])
+
+
 def write_outputs(result: JobResult, out_dir: str | Path | None = None) -> dict[str, Path]:
     """Write trajectories, logs, summary and report of a run; returns the paths by name.
 
-    Every file is written atomically; no output may overwrite an input of the job.
+    The files form one set (:class:`insgnss.io.outputset.OutputSet`): they are written into a
+    hidden staging folder and moved onto their final names together at the end, so an
+    interrupted run leaves the previous outputs complete, or (interrupted during the final
+    renames) a set marked by an ``INCOMPLETE`` file. A run whose filter stopped early writes
+    what it computed and keeps ``INCOMPLETE`` (with the reason; ``summary.json`` has
+    ``"complete": false``, the error and ``"stopped_at"``). No output may overwrite an input.
     """
-    from .io.native import atomic_write_text, write_table
-    from .validate import ensure_not_input
+    from .io.native import atomic_write, write_table
+    from .io.outputset import MARKER, OutputSet
 
     job = result.job
     out = Path(out_dir) if out_dir is not None else job.output_dir
-    out.mkdir(parents=True, exist_ok=True)
-    protect = job.input_paths()
-    paths: dict[str, Path] = {}
-
-    def dest(name):
-        p = out / name
-        ensure_not_input(p, protect)
-        return p
-
-    point = job["outputs"]["point"]
-    tables = {"forward": result.filter.forward, "smoothed": result.filter.smoothed}
-    for name, df in tables.items():
-        if df is None:
-            continue
-        if point == "antenna":
-            df = move_point(df, result.inputs.lever_arm)
+    complete = bool(result.summary.get("complete", result.filter.complete))
+    with OutputSet(out, protect=job.input_paths(), stale=OUTPUT_NAMES + (MARKER,)) as outs:
+        dest = outs.path
+        point = job["outputs"]["point"]
+        tables = {"forward": result.filter.forward, "smoothed": result.filter.smoothed}
         formats = job["outputs"]["formats"]
-        if "csv" in formats:
-            paths[f"{name}.csv"] = write_table(df, dest(f"{name}.csv"))
-        if "nav" in formats:
-            from .io.kfgins import write_kfgins_nav
+        for name, df in tables.items():
+            if df is None:
+                continue
+            if point == "antenna":
+                df = move_point(df, result.inputs.lever_arm)
+            if "csv" in formats:
+                write_table(df, dest(f"{name}.csv"))
+            if "nav" in formats:
+                from .io.kfgins import write_kfgins_nav
 
-            paths[f"{name}.nav"] = write_kfgins_nav(df, dest(f"{name}.nav"))
-        if "kml" in formats:
-            from .io.tracks import write_kml
+                write_kfgins_nav(df, dest(f"{name}.nav"))
+            if "kml" in formats:
+                from .io.tracks import write_kml
 
-            paths[f"{name}.kml"] = write_kml({name: df}, dest(f"{name}.kml"))
-        if "geojson" in formats:
-            from .io.tracks import write_geojson
+                write_kml({name: df}, dest(f"{name}.kml"))
+            if "geojson" in formats:
+                from .io.tracks import write_geojson
 
-            paths[f"{name}.geojson"] = write_geojson({name: df}, dest(f"{name}.geojson"))
-        if "eval" in formats:
-            from .io.tracks import write_eval_csv
+                write_geojson({name: df}, dest(f"{name}.geojson"))
+            if "eval" in formats:
+                from .io.tracks import write_eval_csv
 
-            ant = move_point(tables[name], result.inputs.lever_arm)
-            paths[f"{name}_eval.csv"] = write_eval_csv(ant, dest(f"{name}_eval.csv"))
-    paths["innovations.csv"] = write_table(result.filter.innovations.set_index("time")
-                                           if "time" in result.filter.innovations.columns
-                                           else result.filter.innovations,
-                                           dest("innovations.csv"))
-    paths["rejected.csv"] = write_table(result.filter.rejected.set_index("time")
-                                        if "time" in result.filter.rejected.columns
-                                        else result.filter.rejected, dest("rejected.csv"))
-    for name, ev in result.evaluation.items():
-        if len(ev["outages"]):
-            p = dest(f"outages_{name}.csv")
-            ev["outages"].to_csv(p.with_suffix(".tmp"), index=False)
-            p.with_suffix(".tmp").replace(p)
-            paths[p.name] = p
-    summary = dict(result.summary)
-    summary["files"] = sorted(paths)
-    paths["summary.json"] = atomic_write_text(dest("summary.json"),
-                                              json.dumps(_jsonable(summary), indent=2) + "\n")
-    if job["outputs"]["report"]:
-        from .report import write_report
+                write_eval_csv(move_point(tables[name], result.inputs.lever_arm),
+                               dest(f"{name}_eval.csv"))
+        for name in ("innovations", "rejected"):
+            log = getattr(result.filter, name)
+            write_table(log.set_index("time") if "time" in log.columns else log,
+                        dest(f"{name}.csv"))
+        for name, ev in result.evaluation.items():
+            if len(ev["outages"]):
+                table = ev["outages"]
+                atomic_write(dest(f"outages_{name}.csv"),
+                             lambda p, table=table: table.to_csv(p, index=False))
+        summary = dict(result.summary)
+        summary["files"] = sorted(outs.names + ["summary.json"]
+                                  + (["report.html"] if job["outputs"]["report"] else [])
+                                  + ([] if complete else [MARKER]))
+        from .io.native import atomic_write_text
 
-        paths["report.html"] = write_report(result, dest("report.html"))
-    return paths
+        atomic_write_text(dest("summary.json"), json.dumps(_jsonable(summary), indent=2) + "\n")
+        if job["outputs"]["report"]:
+            from .report import write_report
+
+            write_report(result, dest("report.html"))
+        reason = "" if complete else (
+            f"The filter stopped early at t = {summary.get('stopped_at')} s: "
+            f"{summary.get('error')}\nThe trajectories and logs end there (summary.json has "
+            '"complete": false).')
+        return outs.commit(complete=complete, reason=reason)
 
 
 def _jsonable(x):

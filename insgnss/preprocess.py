@@ -13,6 +13,12 @@ averaged over the same span, using only GNSS epochs above ``min_speed`` and outs
 windows (so it never uses withheld data), refined to sub-sample precision by a parabola through
 the three best shifts. Corrected IMU time = IMU time + ``dt``.
 
+GNSS position outliers (a float solution jumping tens of metres) make the central-difference
+course rate absurd at the neighbouring epochs; they are excluded before the fit: epochs whose
+rate residual (at zero shift, then again at the first estimate) is farther than
+``max(5 * 1.4826 * MAD, 5 deg/s)`` from the median residual do not take part
+(``info["outliers"]`` counts them).
+
 Noise from a static window
 --------------------------
 ``ARW = std(w) sqrt(dt)``, ``VRW = std(f) sqrt(dt)`` per axis (largest axis), the white-noise
@@ -73,19 +79,29 @@ def estimate_time_offset(imu: pd.DataFrame, gnss: pd.DataFrame, windows=(), *,
         b = np.searchsorted(t, tt + half)
         return (cs[b] - cs[a]) / np.maximum(b - a, 1)
 
-    tc, half = tg[ok], 0.5 * span[ok]
+    tc, half, cr = tg[ok], 0.5 * span[ok], course_rate[ok]
     shifts = np.arange(-search, search + step / 2, step)
-    # IMU stamp t_imu holds the motion at t_imu + dt: compare GNSS at tc with IMU at tc - dt
-    rms = np.array([np.sqrt(np.mean((course_rate[ok] - mean_rate(tc - s, half)) ** 2))
-                    for s in shifts])
-    k = int(np.argmin(rms))
+
+    def inliers(shift):
+        r = cr - mean_rate(tc - shift, half)
+        d = np.abs(r - np.median(r))
+        return d <= max(5.0 * 1.4826 * float(np.median(d)), np.radians(5.0))
+
+    use = inliers(0.0)
+    for _ in range(2):  # inliers at zero shift, then at the first estimate
+        # IMU stamp t_imu holds the motion at t_imu + dt: compare GNSS at tc with IMU at tc - dt
+        rms = np.array([np.sqrt(np.mean((cr[use] - mean_rate(tc[use] - s, half[use])) ** 2))
+                        for s in shifts])
+        k = int(np.argmin(rms))
+        use = inliers(float(shifts[k]))
     dt = float(shifts[k])
     if 0 < k < len(shifts) - 1:
         y0, y1, y2 = rms[k - 1], rms[k], rms[k + 1]
         den = y0 - 2 * y1 + y2
         if den > 0:
             dt += 0.5 * step * (y0 - y2) / den
-    info = {"epochs": int(ok.sum()), "rms_rate_deg_s": float(np.degrees(rms[k])),
+    info = {"epochs": int(ok.sum()), "outliers": int(ok.sum() - use.sum()),
+            "rms_rate_deg_s": float(np.degrees(rms[k])),
             "rms_rate_at_zero_deg_s": float(np.degrees(rms[np.argmin(np.abs(shifts))])),
             "at_search_edge": bool(k in (0, len(shifts) - 1))}
     return dt, info

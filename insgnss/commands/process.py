@@ -3,6 +3,11 @@ error-state filter and the RTS smoother with the job's aiding, evaluate against 
 and write the forward and smoothed trajectories, innovation and rejection logs, a JSON summary
 and an HTML report (docs/jobs.md).
 
+Exit status: 0 complete; 2 bad input or job (the error names file, row, column); 3 the filter
+stopped early (non-finite or non-positive-definite state, runaway NIS): the results up to the
+stop are written and marked by an INCOMPLETE file; 130 interrupted (Ctrl-C): the previous
+outputs are left as they were.
+
 Example:
   insgnss process scenarios/drive_0708.toml -o out/drive
 """
@@ -10,10 +15,13 @@ Example:
 from __future__ import annotations
 
 import argparse
+import sys
 from pathlib import Path
 
 NAME = "process"
 HELP = "run a job file end to end (filter, smoother, evaluation, report)"
+#: exit status of a run whose filter stopped early (partial outputs written, marked INCOMPLETE)
+EXIT_INCOMPLETE = 3
 
 
 def register(p: argparse.ArgumentParser) -> None:
@@ -37,13 +45,27 @@ def run(args: argparse.Namespace) -> int:
     print_summary(res)
     out = args.output or job.output_dir
     print(f"wrote {len(paths)} files to {out}")
-    return 0 if res.filter.complete else 3
+    if not res.summary["complete"]:
+        print(f"insgnss process: INCOMPLETE: the filter stopped early at t = "
+              f"{res.summary.get('stopped_at')} s: {res.summary['error']}\n"
+              f"insgnss process: the results up to that time are in {out}, marked by the file "
+              f"INCOMPLETE and \"complete\": false in summary.json", file=sys.stderr)
+        return EXIT_INCOMPLETE
+    return 0
 
 
 def print_summary(res) -> None:
     s = res.summary
     if not s["complete"]:
         print(f"INCOMPLETE: the filter stopped early: {s['error']}")
+    imu = s.get("imu") or {}
+    if imu.get("gaps") or imu.get("dropped_duplicates"):
+        gaps = imu.get("gaps") or []
+        longest = max((g["duration"] for g in gaps), default=0.0)
+        print(f"IMU: {len(gaps)} gap(s) (longest {longest:.3f} s, "
+              f"{sum(g['missing'] for g in gaps)} samples missing), "
+              f"{len(imu.get('dropped_duplicates') or [])} duplicated sample(s) dropped, "
+              f"{len(imu.get('segments') or [1])} segment(s)")
     t = s["timing_s"]
     print(f"{s['job']}: {s['imu_samples']:,} IMU samples, filter {t.get('total', 0):.2f} s, "
           f"job {t.get('job_total', 0):.2f} s")

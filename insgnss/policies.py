@@ -1,0 +1,260 @@
+"""Job-level input policies (issue 8): IMU gaps and duplicated samples, and split runs.
+
+The readers validate what they read (:mod:`insgnss.validate`, docs/formats.md); the pipeline
+applies the same policies once more to the IMU table it is about to process, so that tables
+that did not come from a reader (simulation, data modified in memory, a native CSV) get the same
+treatment and every run reports what was repaired (``summary.json`` ``"imu"``):
+
+- **time order**: a time stamp going backwards is a :class:`~insgnss.errors.TimeOrderError`;
+  repeated stamps are dropped with a warning (``inputs.imu.duplicates = "drop"``, the first is
+  kept) or are an error (``"error"``);
+- **gaps**: an interval longer than 1.5 nominal sample intervals (``attrs["nominal_dt"]`` from
+  the declared rate, else the median interval) is a gap. Gaps up to ``inputs.imu.max_gap``
+  seconds are bridged with a warning (the mechanization integrates across them) and recorded.
+  Longer gaps follow ``inputs.imu.gap_policy``: ``"error"`` (default) stops with a
+  :class:`~insgnss.errors.DataGapError` naming the file and row after the gap, ``"bridge"``
+  bridges them too, ``"split"`` processes the contiguous segments as separate runs
+  (:func:`run_segments`);
+- **split runs**: the first segment uses the job's initialization; each later one starts at
+  its first sample with the job's method and falls back to ``gnss_velocity`` (GNSS position,
+  velocity and course over ground) when that fails (a static alignment while the vehicle
+  moves). A segment that cannot be initialized is skipped with a warning and recorded. The
+  outputs hold the segments one after the other, with a ``segment`` column; the filter state
+  and the smoother never cross a long gap.
+"""
+
+from __future__ import annotations
+
+import copy
+import warnings
+
+import numpy as np
+import pandas as pd
+
+from .config import Job
+from .errors import InsgnssError
+from .validate import GapPolicy, apply_gap_policy, check_time_order, find_gaps, warn
+
+#: fewest IMU samples a split segment needs to be processed
+MIN_SEGMENT_SAMPLES = 100
+
+
+def gap_policy(job: Job) -> GapPolicy:
+    """The job's IMU gap policy (``inputs.imu.gap_policy``, ``inputs.imu.max_gap``)."""
+    spec = job["inputs"]["imu"]
+    return GapPolicy(max_bridge=float(spec["max_gap"]), long=spec["gap_policy"])
+
+
+def _where(imu: pd.DataFrame) -> tuple[str, np.ndarray]:
+    """File label and row numbers for messages: the file's lines when the table is as read,
+    else 1-based sample numbers of the table (data built or modified in memory)."""
+    src = imu.attrs.get("source")
+    rows = imu.attrs.get("source_rows")
+    if src and rows is not None and len(rows) == len(imu):
+        return str(src), np.asarray(rows, np.int64)
+    label = f"IMU table from {src} (rows are sample numbers)" if src else \
+        "IMU table (rows are sample numbers)"
+    return label, np.arange(len(imu), dtype=np.int64) + 1
+
+
+def check_imu_table(imu: pd.DataFrame, policy: GapPolicy, duplicates: str = "drop"
+                    ) -> tuple[pd.DataFrame, dict]:
+    """Apply the time-order, duplicate and gap policies to an IMU table about to be processed.
+
+    Parameters
+    ----------
+    imu : DataFrame
+        IMU table (rates or increments) indexed by time [s].
+    policy : GapPolicy
+    duplicates : {"drop", "error"}
+
+    Returns
+    -------
+    imu : DataFrame
+        The table without dropped duplicates; ``attrs`` ``gaps``, ``segments`` and
+        ``dropped_duplicates`` describe this table.
+    report : dict
+        ``{"gaps": [...], "dropped_duplicates": [...], "segments": [[t0, t1], ...],
+        "nominal_dt": s}`` (rows are the file's lines when the table came from a reader, else
+        1-based sample numbers). Warnings are emitted only for problems the reader has not
+        already announced.
+    """
+    file, rows = _where(imu)
+    t = np.asarray(imu.index, float)
+    col = imu.attrs.get("time_column", "time")
+    keep, dropped = check_time_order(t, rows, file, column=col, duplicates=duplicates)  # warns
+    if dropped:
+        attrs = dict(imu.attrs)
+        imu = imu.loc[keep]
+        imu.attrs = attrs
+        t, rows = t[keep], rows[keep]
+    dropped = list(imu.attrs.get("dropped_duplicates") or []) + dropped  # the reader's + these
+    nominal = imu.attrs.get("nominal_dt")
+    if not nominal or not np.isfinite(nominal) or nominal <= 0:
+        nominal = float(np.median(np.diff(t))) if t.size > 1 else 0.0
+    gaps = find_gaps(t, rows, nominal, policy.factor) if t.size > 1 else []
+    known = {round(float(g["start"]), 9) for g in imu.attrs.get("gaps") or []}
+    new = [g for g in gaps if round(g["start"], 9) not in known]
+    if new:
+        apply_gap_policy(new, policy, file, float(t[0]), float(t[-1]), column=col)  # warns/raises
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        gaps, segments = apply_gap_policy(gaps, policy, file, float(t[0]), float(t[-1]),
+                                          column=col)
+    out = imu.copy(deep=False)
+    out.attrs = dict(imu.attrs)
+    out.attrs.update(gaps=gaps, segments=segments, dropped_duplicates=dropped,
+                     nominal_dt=float(nominal))
+    report = {"nominal_dt": float(nominal), "gaps": gaps,
+              "bridged_s": float(sum(g["duration"] for g in gaps if g["action"] == "bridged")),
+              "dropped_duplicates": dropped,
+              "segments": [[float(a), float(b)] for a, b in segments]}
+    return out, report
+
+
+def shift_report(report: dict, dt: float) -> dict:
+    """The report of :func:`check_imu_table` with its times moved by ``dt`` [s] (an IMU time
+    offset applied after the check)."""
+    if not dt:
+        return report
+    out = dict(report)
+    out["gaps"] = [dict(g, start=g["start"] + dt, end=g["end"] + dt) for g in report["gaps"]]
+    out["dropped_duplicates"] = [dict(d, time=d["time"] + dt)
+                                 for d in report["dropped_duplicates"]]
+    out["segments"] = [[a + dt, b + dt] for a, b in report["segments"]]
+    return out
+
+
+def _segment_job(job: Job, windows, start: float | None, method: str | None) -> Job:
+    s = copy.deepcopy(job.settings)
+    if start is not None:
+        s["initialization"]["start_time"] = float(start)
+    if method is not None:
+        s["initialization"]["method"] = method
+    s["inputs"]["imu"]["estimate_time_offset"] = False  # applied once to the whole table
+    s["inputs"]["imu"]["gap_policy"] = "bridge"  # the segment has no long gap left
+    s["outages"] = {"windows": [[float(a), float(b)] for a, b in windows],
+                    "relative_to": "absolute",
+                    "periodic": {"start": None, "length": None, "gap": None,
+                                 "stop_before_end": 0.0}}
+    return Job(settings=s, path=job.path, simulation=job.simulation)
+
+
+def run_segments(job: Job, inputs, windows, segments, *, progress=None, preprocessing=None):
+    """Run the job on each contiguous IMU segment and merge the results (module docstring).
+
+    Returns a :class:`insgnss.pipeline.JobResult` whose ``filter`` holds the segments one after
+    the other (``segment`` column in the trajectories and logs) and whose summary lists the
+    segments (``"segments"``: start, end, initialization, complete, error or skip reason).
+    """
+    from dataclasses import replace
+
+    from .pipeline import JobResult, evaluate_solution, run_job
+
+    imu = inputs.imu
+    t = np.asarray(imu.index, float)
+    results, info = [], []
+    for k, (a, b) in enumerate(segments):
+        i0, i1 = np.searchsorted(t, a, "left"), np.searchsorted(t, b, "right")
+        rec = {"segment": k, "start": float(a), "end": float(b), "samples": int(i1 - i0)}
+        info.append(rec)
+        if i1 - i0 < MIN_SEGMENT_SAMPLES:
+            rec["skipped"] = f"fewer than {MIN_SEGMENT_SAMPLES} IMU samples"
+            warn(f"IMU segment {k} ({a!r} to {b!r} s) skipped: {rec['skipped']}",
+                 file=imu.attrs.get("source"))
+            continue
+        seg_imu = imu.iloc[i0:i1]
+        gnss = inputs.gnss
+        if gnss is not None:
+            gt = np.asarray(gnss.index, float)
+            gnss = gnss.iloc[np.searchsorted(gt, a, "left"):np.searchsorted(gt, b, "right")]
+        seg_inputs = replace(inputs, imu=seg_imu, gnss=gnss)
+        start = None if k == 0 else float(a)
+        methods = [None]
+        if k > 0 and job["initialization"]["method"] != "gnss_velocity" and gnss is not None \
+                and "vel_e" in gnss.columns:
+            methods.append("gnss_velocity")
+        res, errors = None, []
+        for m in methods:
+            try:
+                res = run_job(_segment_job(job, windows, start, m), progress=progress,
+                              inputs=replace(seg_inputs))
+                break
+            except InsgnssError as exc:
+                if k == 0:
+                    raise
+                errors.append(f"{m or job['initialization']['method']}: {exc}")
+        if res is None:
+            rec["skipped"] = "; ".join(errors)
+            warn(f"IMU segment {k} ({a!r} to {b!r} s) skipped: cannot initialize: "
+                 f"{rec['skipped']}", file=imu.attrs.get("source"))
+            continue
+        rec.update(initialization=res.summary["initialization"]["method"],
+                   complete=res.summary["complete"], error=res.summary["error"],
+                   evaluation=res.summary["evaluation"])
+        results.append((k, res))
+    if not results:
+        raise InsgnssError("no IMU segment could be processed", file=imu.attrs.get("source"))
+    first = results[0][1]
+    merged = _merge_filter([(k, r.filter) for k, r in results])
+    out = JobResult(job, inputs, first.init, list(windows), merged)
+    for name in ("forward", "smoothed"):
+        ev = evaluate_solution(getattr(merged, name), inputs, windows, job)
+        if ev:
+            out.evaluation[name] = ev
+    summary = dict(first.summary)
+    summary.update(
+        complete=bool(merged.complete), error=None if merged.error is None else str(merged.error),
+        imu_samples=int(sum(r.summary["imu_samples"] for _, r in results)),
+        measurements={n: int(sum(r.summary["measurements"].get(n, 0) for _, r in results))
+                      for n in {n for _, r in results for n in r.summary["measurements"]}},
+        rejected=merged.rejected.groupby("type").size().astype(int).to_dict()
+        if len(merged.rejected) else {},
+        outages=[list(w) for w in windows], segments=info,
+        preprocessing=dict(preprocessing or {}),
+        evaluation={k: v["summary"] for k, v in out.evaluation.items()})
+    summary["timing_s"] = {key: float(sum(r.summary["timing_s"].get(key, 0.0)
+                                          for _, r in results))
+                           for key in first.summary["timing_s"]}
+    out.summary = summary
+    return out
+
+
+def _merge_filter(parts):
+    """One FilterResult holding several segments' results in time order."""
+    from dataclasses import replace
+
+    def cat(name, seg_col=True):
+        frames = []
+        for k, f in parts:
+            df = getattr(f, name)
+            if df is None:
+                return None
+            if seg_col:
+                df = df.copy()
+                df["segment"] = k
+            frames.append(df)
+        out = pd.concat(frames)
+        return out.reset_index(drop=True) if name in ("innovations", "rejected") else out
+
+    fs = [f for _, f in parts]
+    err = next((f.error for f in fs if f.error is not None), None)
+    same = all(f.P_filtered.shape[1:] == fs[0].P_filtered.shape[1:] for f in fs)
+
+    def stack(name):
+        arrs = [getattr(f, name) for f in fs]
+        if not same or any(a is None for a in arrs):
+            return None
+        return np.concatenate(arrs)
+
+    timing = {k: float(sum(f.timing.get(k, 0.0) for f in fs)) for k in fs[0].timing}
+    return replace(fs[0], forward=cat("forward"), smoothed=cat("smoothed"),
+                   innovations=cat("innovations"), rejected=cat("rejected"),
+                   complete=all(f.complete for f in fs), error=err, timing=timing,
+                   epoch_times=np.concatenate([f.epoch_times for f in fs]),
+                   P_filtered=stack("P_filtered"), P_predicted=stack("P_predicted"),
+                   feedback=stack("feedback"), P_smoothed=stack("P_smoothed"),
+                   params=stack("params"), final=fs[-1].final)
+
+
+__all__ = ["MIN_SEGMENT_SAMPLES", "check_imu_table", "gap_policy", "run_segments", "shift_report"]
