@@ -474,7 +474,7 @@ def foot_detector() -> DetectorConfig:
     """The foot preset's stance detector: gait-adaptive SHOE (see :mod:`insgnss.detect`)."""
     return DetectorConfig(method="adaptive", window=0.04, threshold=1.0e6,
                           sigma_a=PYSHOE_SIGMA_A, sigma_w=PYSHOE_SIGMA_W, adapt_window=3.0,
-                          adapt_factor=10.0, adapt_peak_ratio=100.0, adapt_gait_peak=1.0e9,
+                          adapt_factor=10.0, adapt_peak_ratio=30.0, adapt_gait_peak=5.0e8,
                           quiet_duration=0.5)
 
 
