@@ -209,3 +209,25 @@ def test_perfect_sensors_filter_stays_on_truth(drive):
     assert h[-10000:].max() < 0.3
     assert r.innovations.accepted.all()
     assert r.innovations.nis.mean() < 4.0
+
+
+def test_zaru_observes_the_vertical_gyro_bias():
+    """At a standstill ZARU (reduced to its vertical row) estimates the vertical gyro bias."""
+    from mech_helpers import static_increments
+
+    from insgnss.filter import Zaru, Zupt
+
+    imu, init = static_increments(60.0, 100.0, lat=0.9, roll=0.01, pitch=-0.02, heading=1.0)
+    b = np.radians(100.0) / 3600.0  # 100 deg/h
+    imu = imu.copy()
+    imu["dtheta_z"] += b * np.r_[0.0, np.diff(imu.index.to_numpy())]
+    rng = np.random.default_rng(5)
+    imu["dtheta_z"] += rng.standard_normal(len(imu)) * grade("consumer").gyro_arw * np.sqrt(0.01)
+    t = np.arange(1.0, 60.0, 1.0)
+    res = run_riss_filter(imu, np.zeros(len(imu)), init, [Zaru(t), Zupt(t)],
+                          FilterConfig(imu_model="consumer", smoother=False))
+    est = res.forward.gyro_bias_z.iloc[-1]
+    print(f"\nZARU: vertical gyro bias {np.degrees(b) * 3600:.1f} deg/h, estimated "
+          f"{np.degrees(est) * 3600:.1f} +- {np.degrees(res.forward.gyro_bias_z_std.iloc[-1]) * 3600:.1f}")
+    assert est == pytest.approx(b, rel=0.2)
+    assert set(res.innovations.dof[res.innovations.type == "zaru"]) == {1}

@@ -80,7 +80,7 @@ extrapolated with its velocity.
 from __future__ import annotations
 
 import time as _time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 import pandas as pd
@@ -114,7 +114,7 @@ from ..mechanization.riss import (
 from ..mechanization.strapdown import NAV_COLS, NavState
 from . import kernels
 from .engine import FilterConfig, FilterResult
-from .measurements import NominalState
+from .measurements import NominalState, Zaru
 from .models import StateLayout
 from .smoother import STD_COLS, rts_error_state
 
@@ -235,8 +235,9 @@ class RissConfig:
     odometer_speed_std : float
         White noise of each odometer speed sample [m/s].
     odometer_rate : float, optional
-        Rate of independent odometer samples [Hz] (default: the IMU rate); sets the position
-        random walk ``odometer_speed_std^2 / rate``.
+        Rate of independent odometer samples [Hz]; sets the position random walk
+        ``odometer_speed_std^2 / rate``. Default: the odometer table's rate (the IMU rate for
+        speeds given per IMU sample).
     odometer_scale_std : float
         Initial std of the odometer scale factor (fraction).
     odometer_scale_psd : float
@@ -797,6 +798,10 @@ def run_riss_filter(
         inputs = riss_inputs(imu, odometer, window=riss.window)
     t = inputs.t
     dt_imu = float(np.median(np.diff(t)))
+    if riss.odometer_rate is None and isinstance(odometer, pd.DataFrame) and len(odometer) > 1:
+        dt_odo = float(np.median(np.diff(odometer.index.to_numpy(float))))
+        if dt_odo > 1.1 * dt_imu:  # slower than the IMU: its samples are the independent ones
+            riss = replace(riss, odometer_rate=1.0 / dt_odo)
     proc = riss_process(config, riss, dt_imu)
     lay = proc.layout
     n, ny = lay.n, lay.ny
@@ -882,7 +887,10 @@ def run_riss_filter(
                     z, Hv, R = res
                     z = np.atleast_1d(np.asarray(z, float))
                     R = np.atleast_2d(np.asarray(R, float))
-                    H = np.atleast_2d(Hv) @ T
+                    Hv = np.atleast_2d(Hv)
+                    if isinstance(m, Zaru):  # only the vertical gyro exists
+                        z, Hv, R = z[2:], Hv[2:], R[2:, 2:]
+                    H = Hv @ T
                     S = H @ P @ H.T + R
                     nis = kernels.nis(S, z)
                     p_gate = m.gate_probability
@@ -1127,7 +1135,11 @@ def run_riss_job(job, inputs, windows, model, progress=None):
         state.time = float(imu.index[0])
     meas = pl.build_measurements(job, inputs, windows, imu)
     cfg = pl.filter_config(job, model, init)
-    res = run_riss_filter(imu, odo, state, meas, cfg, RissConfig())
+    # the job's odometer sigma (aiding.odometer_std) is the odometer speed noise; with
+    # filter.scale_factors the vertical gyro scale factor is estimated
+    rcfg = RissConfig(odometer_speed_std=float(job["aiding"]["odometer_std"]),
+                      gyro_scale=bool(job["filter"]["scale_factors"]))
+    res = run_riss_filter(imu, odo, state, meas, cfg, rcfg)
     out = pl.JobResult(job, inputs, init, windows, res)
     for name in ("forward", "smoothed"):
         ev = pl.evaluate_solution(getattr(res, name), inputs, windows, job)
