@@ -34,7 +34,7 @@ from .errors import ConfigError, InputFormatError
 from .evaluate import move_point, outage_metrics, position_errors
 from .filter.engine import FilterConfig, FilterResult, run_filter
 from .filter.measurements import BodyVelocity, Cupt, GnssPosition, GnssVelocity, Zaru, Zupt
-from .imu import ACCEL_COLS, GYRO_COLS, ImuErrorModel, grade
+from .imu import ACCEL_COLS, DV_COLS, GYRO_COLS, ImuErrorModel, grade
 from .mechanization.strapdown import NavState, mechanize
 from .outages import in_windows, periodic_windows
 from .policies import check_imu_table, gap_policy, run_segments, shift_report
@@ -236,6 +236,14 @@ class Initialization:
     static_end: float | None = None
 
 
+def _mean_specific_force(win: pd.DataFrame) -> np.ndarray:
+    """Mean specific force [m/s^2] of a rate or increment IMU window."""
+    if ACCEL_COLS[0] in win.columns:
+        return win[ACCEL_COLS].to_numpy().mean(0)
+    t = win.index.to_numpy(float)
+    return win[DV_COLS].to_numpy()[1:].sum(0) / max(t[-1] - t[0], 1e-9)
+
+
 def _gnss_at(gnss: pd.DataFrame, t: float) -> np.ndarray:
     ti = gnss.index.to_numpy(float)
     return np.array([np.interp(t, ti, gnss[c].to_numpy(float)) for c in ("lat", "lon", "height")])
@@ -284,7 +292,7 @@ def initialize(job: Job, inputs: Inputs, model: ImuErrorModel) -> Initialization
         t_s = float(gnss.index[k])
         hdg = float(np.arctan2(gnss["vel_e"].iloc[k], gnss["vel_n"].iloc[k]))
         win = imu.loc[t_s - 0.5: t_s + 0.5]
-        r, p = level(win[ACCEL_COLS].to_numpy().mean(0)) if given[0] is None else \
+        r, p = level(_mean_specific_force(win)) if given[0] is None else \
             (np.radians(given[0]), np.radians(given[1] or 0.0))
         from .attitude import euler_to_dcm
 

@@ -172,8 +172,12 @@ def run_segments(job: Job, inputs, windows, segments, *, progress=None, preproce
         start = None if k == 0 else float(a)
         methods = [None]
         if k > 0 and job["initialization"]["method"] != "gnss_velocity" and gnss is not None \
-                and "vel_e" in gnss.columns:
-            methods.append("gnss_velocity")
+                and "vel_e" in gnss.columns and len(gnss):
+            # moving at the segment start (GNSS speed): start from GNSS position, velocity and
+            # course; standing: the job's own method (e.g. a static alignment) first
+            moving = float(np.hypot(gnss["vel_e"].iloc[0], gnss["vel_n"].iloc[0])) > \
+                job["initialization"]["min_speed"]
+            methods = ["gnss_velocity", None] if moving else [None, "gnss_velocity"]
         res, errors = None, []
         for m in methods:
             try:
@@ -191,7 +195,8 @@ def run_segments(job: Job, inputs, windows, segments, *, progress=None, preproce
             continue
         rec.update(initialization=res.summary["initialization"]["method"],
                    complete=res.summary["complete"], error=res.summary["error"],
-                   evaluation=res.summary["evaluation"])
+                   evaluation={n: {key: e.get(key) for key in ("rms_h_m", "max_h_m", "n_covered")}
+                               for n, e in res.summary["evaluation"].items()})
         results.append((k, res))
     if not results:
         raise InsgnssError("no IMU segment could be processed", file=imu.attrs.get("source"))
