@@ -52,6 +52,7 @@ def test_monte_carlo_nees_nis_inside_chi2_bounds():
     for name, arr in list(nees.items()) + list(nis.items()):
         avg = np.mean(np.array(arr), axis=0)
         inside = np.mean((avg >= lo) & (avg <= hi))
+        print(f"{name}: mean {avg.mean():.2f}, inside [{lo:.2f}, {hi:.2f}] for {100 * inside:.1f} %")
         assert inside >= 0.90, (name, inside, avg.mean())
         assert 2.5 < avg.mean() < 3.5, (name, avg.mean())
 
@@ -70,6 +71,7 @@ def test_horizontal_rms_below_gnss_sigma():
     rms = np.sqrt(np.mean(err["east"] ** 2 + err["north"] ** 2))
     errs = nav_errors(res.smoothed, truth)
     rms_s = np.sqrt(np.mean(errs["east"] ** 2 + errs["north"] ** 2))
+    print(f"horizontal RMS forward {rms:.3f} m, smoothed {rms_s:.3f} m (GNSS sigma {sigma} m)")
     assert rms < sigma and rms_s < rms
     # and the raw GNSS itself is worse
     g = nav_errors(gnss.assign(roll=0.0, pitch=0.0, heading=0.0), truth)
@@ -89,6 +91,8 @@ def test_heading_converges_from_10_deg_tactical():
     h = np.abs(err["heading"].to_numpy()) / DEG
     t = err.index.to_numpy()
     assert h[0] > 9.9
+    print(f"heading error < 0.2 deg from t = {t[np.nonzero(h >= 0.2)[0][-1] + 1]:.2f} s; "
+          f"max after 60 s {h[t >= 60.0].max():.3f} deg")
     assert h[t >= 60.0].max() < 0.2
     # and consistently with the filter's own uncertainty
     assert np.all(h[t >= 60.0] < 3 * res.forward["heading_std"].to_numpy()[t >= 60.0] / DEG)
@@ -120,6 +124,7 @@ def test_gating_rejects_gnss_jumps():
     e1 = nav_errors(res.forward, truth)
     r0 = np.sqrt(np.mean(e0["east"] ** 2 + e0["north"] ** 2))
     r1 = np.sqrt(np.mean(e1["east"] ** 2 + e1["north"] ** 2))
+    print(f"{idx.size} jumps, {len(rej)} rejected; RMS clean {r0:.3f} m, with jumps {r1:.3f} m")
     assert abs(r1 - r0) <= 0.1 * r0, (r0, r1)
     # without gating the jumps wreck the solution
     free = run_filter(imu, init, [GnssPosition(bad), GnssVelocity(bad)],

@@ -19,7 +19,7 @@ from filter_sim import (
 )
 
 from insgnss.attitude import euler_to_dcm, rotvec_to_dcm
-from insgnss.earth import radii
+from insgnss.earth import enu_displacement_to_geodetic, radii
 from insgnss.errors import InputFormatError
 from insgnss.filter import (
     BodyVelocity,
@@ -190,6 +190,7 @@ def test_zupt_bounds_velocity_error_at_stops_mems():
     err = nav_errors(res.forward, truth)
     vel_err = np.linalg.norm(err[["vel_e", "vel_n", "vel_u"]].to_numpy(), axis=1)
     stop = _stop_indices(truth, guard=0.5)
+    print(f"max velocity error in stops: ZUPT {vel_err[stop].max():.4f} m/s")
     assert vel_err[stop].max() < 0.01
     # without ZUPT the velocity error in the stops is much larger
     res0 = run_filter(imu, init, [GnssPosition(gnss)], cfg)
@@ -210,6 +211,8 @@ def test_zaru_estimates_vertical_gyro_bias_mems():
     res = run_filter(imu, init, ms, FilterConfig(imu_model=model, initial_att_std=(0.01, 0.01, 0.05)))
     bz_true = errs["gyro_bias"][-1, 2]
     bz_est = res.forward["gyro_bias_z"].iloc[-1]
+    print(f"vertical gyro bias: true {bz_true:.3e}, ZARU estimate {bz_est:.3e} rad/s "
+          f"({100 * abs(bz_est - bz_true) / abs(bz_true):.2f} % error)")
     assert abs(bz_est - bz_true) < 0.2 * abs(bz_true)
     # the horizontal gyro biases too, and much better than 20 %
     assert np.allclose(res.forward[["gyro_bias_x", "gyro_bias_y"]].iloc[-1], errs["gyro_bias"][-1, :2],
@@ -232,7 +235,9 @@ def test_cupt_removes_accumulated_error():
     t_cp = float(np.round(0.5 * (s0 + s1)))
     cp = truth.loc[t_cp]
     sigma = 0.05
-    cupt = Cupt([t_cp], cp["lat"], cp["lon"], cp["height"], std=sigma)
+    cp_err = rng.standard_normal(3) * sigma  # the surveyed coordinates have their own error
+    dlat, dlon, dh = enu_displacement_to_geodetic(cp["lat"], cp["height"], *cp_err)
+    cupt = Cupt([t_cp], cp["lat"] + dlat, cp["lon"] + dlon, cp["height"] + dh, std=sigma)
     t = truth.index.to_numpy()
     zupt = Zupt(t[(t >= s0 + 0.5) & (t <= s1)][::5], std=0.005)
     cfg = FilterConfig(imu_model=model, initial_att_std=(0.005, 0.005, 0.02))
@@ -241,8 +246,15 @@ def test_cupt_removes_accumulated_error():
     err = nav_errors(res.forward, truth)
     e_before = np.hypot(before.loc[t_cp, "east"], before.loc[t_cp, "north"])
     assert e_before > 20 * sigma  # the coast accumulated a real error
-    assert np.all(np.abs(err.loc[t_cp, ["east", "north", "up"]].to_numpy()) < sigma)
+    e_after = err.loc[t_cp, ["east", "north", "up"]].to_numpy()
+    print(f"CUPT: horizontal error before {e_before:.2f} m, after {np.hypot(*e_after[:2]):.3f} m "
+          f"(control point error {np.hypot(*cp_err[:2]):.3f} m, sigma {sigma} m)")
+    # the solution moves onto the control point: what is left is the point's own error
+    assert np.all(np.abs(e_after - cp_err) < 0.2 * sigma)
     assert np.all(res.forward.loc[t_cp, ["east_std", "north_std", "up_std"]] <= sigma)
+    # and stays there for the rest of the stop (ZUPT)
+    rest = (t > t_cp) & (t <= s1)
+    assert np.all(np.abs(err[["east", "north"]].to_numpy()[rest] - cp_err[:2]) < 0.5 * sigma)
 
 
 def test_heading_measurement_aligns_static_heading():

@@ -523,6 +523,8 @@ def run_filter(
                             i1 = i0 + Rk.shape[0]
                             R[i0:i1, i0:i1] = Rk
                             i0 = i1
+                    if recoveries and recoveries[-1][0] == te:
+                        st.Pp[e] = P  # the gate recovery inflated P(e|e-1): the smoother needs it
                     x, P = kf_update(x, P, z, R, H)
                     P = 0.5 * (P + P.T)
                     if config.check_health:
