@@ -418,7 +418,7 @@ def zupt_filter_kernel(t, dth, dv, rate, still, zaru, pos0, vel0, C0, bg0, ba0, 
             vs[i] = row[3 + i] - xs[3 + i]
         # attitude: C_s = exp(-[phi x]) C_f
         Cf = work[2]
-        Cf[:, :] = euler_to_dcm_nb(row[6], row[7], row[8])
+        euler_to_dcm_into(row[6], row[7], row[8], Cf)
         E = work[0]
         ph = work[3, 0]
         ph[0], ph[1], ph[2] = -xs[6], -xs[7], -xs[8]
@@ -446,12 +446,12 @@ def zupt_filter_kernel(t, dth, dv, rate, still, zaru, pos0, vel0, C0, bg0, ba0, 
 
 
 @njit(cache=True)
-def euler_to_dcm_nb(roll, pitch, heading):
-    """Compiled ``C_b^l = Rz(-A) Rx(p) Ry(r)`` (same as :func:`insgnss.attitude.euler_to_dcm`)."""
+def euler_to_dcm_into(roll, pitch, heading, C):
+    """Compiled ``C_b^l = Rz(-A) Rx(p) Ry(r)`` written into ``C`` (3x3), the same matrix as
+    :func:`insgnss.attitude.euler_to_dcm`."""
     cr, sr = np.cos(roll), np.sin(roll)
     cp, sp = np.cos(pitch), np.sin(pitch)
     ca, sa = np.cos(heading), np.sin(heading)
-    C = np.empty((3, 3))
     C[0, 0] = ca * cr + sa * sp * sr
     C[0, 1] = sa * cp
     C[0, 2] = ca * sr - sa * sp * cr
@@ -461,7 +461,6 @@ def euler_to_dcm_nb(roll, pitch, heading):
     C[2, 0] = -cp * sr
     C[2, 1] = sp
     C[2, 2] = cp * cr
-    return C
 
 
 # --- configuration ---------------------------------------------------------------------------

@@ -19,6 +19,7 @@ from insgnss.foot import (
     _adjoint_back,
     _propagate_cov,
     _update_block,
+    euler_to_dcm_into,
     level,
     run_foot_ins,
 )
@@ -92,6 +93,9 @@ def test_levelling_recovers_roll_and_pitch():
         r, p = level(f_b)
         assert r == pytest.approx(roll, abs=1e-12)
         assert p == pytest.approx(pitch, abs=1e-12)
+        C2 = np.empty((3, 3))
+        euler_to_dcm_into(roll, pitch, 1.234, C2)
+        np.testing.assert_allclose(C2, C, atol=1e-15)
 
 
 # --- simulated walks ----------------------------------------------------------------------------
