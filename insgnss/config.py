@@ -91,7 +91,17 @@ SCHEMA: dict[str, Any] = {
             "std": _spec(_NUM, 0.02, "default point sigma [m]"),
         },
     },
+    "process": {
+        "preset": _spec(str, "standard", "standard: the error-state filter with the aiding "
+                        "below; foot: foot-mounted pedestrian ZUPT/ZARU INS ([foot] table, "
+                        "docs/zupt.md)", choices=["standard", "foot"]),
+    },
+    "foot": _spec(dict, {}, "foot-mounted settings (insgnss.foot.FootConfig fields, with a "
+                  "[foot.detector] sub-table); checked by FootConfig"),
     "initialization": {
+        "lat_deg": _spec(_NUM, None, "given start latitude (jobs without GNSS)"),
+        "lon_deg": _spec(_NUM, None, "given start longitude (jobs without GNSS)"),
+        "height": _spec(_NUM, None, "given start ellipsoidal height [m]"),
         "method": _spec(str, "static", "static, gnss_velocity or given",
                         choices=["static", "gnss_velocity", "given"]),
         "static_duration": _spec(_NUM, 30.0, "static window at the start [s]"),

@@ -62,6 +62,7 @@ import pandas as pd
 from numba import njit
 
 from . import earth
+from .align import level
 from .attitude import euler_to_dcm, rotvec_to_dcm_nb
 from .detect import DetectorConfig, Stillness, detect_arrays, imu_rates
 from .earth import OMEGA_E, radii
@@ -599,12 +600,6 @@ class FootResult:
 
 
 # --- front end -------------------------------------------------------------------------------
-def level(acc_mean: np.ndarray) -> tuple[float, float]:
-    """Roll and pitch [rad] from a mean specific force at rest (body RFU)."""
-    fx, fy, fz = (float(v) for v in acc_mean)
-    return float(np.arctan2(-fx, fz)), float(np.arctan2(fy, np.hypot(fx, fz)))
-
-
 def level_window_mask(t: np.ndarray, still: np.ndarray, seconds: float) -> np.ndarray:
     """Samples used for levelling: the first still run if it starts within ``seconds`` of the
     start (capped at 4 * ``seconds``), else the first ``seconds``."""

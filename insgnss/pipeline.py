@@ -37,7 +37,7 @@ from .filter.measurements import BodyVelocity, Cupt, GnssPosition, GnssVelocity,
 from .imu import ACCEL_COLS, DV_COLS, GYRO_COLS, ImuErrorModel, grade
 from .mechanization.strapdown import NavState, mechanize
 from .outages import in_windows, periodic_windows
-from .policies import check_imu_table, gap_policy, run_segments, shift_report
+from .policies import check_imu_table, gap_noise, gap_policy, run_segments, shift_report
 from .preprocess import estimate_time_offset, shift_time, with_static_noise
 from .validate import check_gnss_in_imu_span
 
@@ -565,6 +565,8 @@ def run_job(job: Job, *, progress: bool | None = None, seed: int | None = None,
                            preprocessing=preprocessing)
         out.summary["imu"] = imu_report
         return out
+    if job["process"]["preset"] == "foot":
+        return _run_foot(job, inputs, windows, t_start)
     if job["filter"]["process_model"] == "riss":
         return _run_riss(job, inputs, windows, model, progress)
     init = initialize(job, inputs, model)
@@ -575,6 +577,7 @@ def run_job(job: Job, *, progress: bool | None = None, seed: int | None = None,
     imu = inputs.imu.loc[init.state.time:]
     meas = build_measurements(job, inputs, windows, imu)
     cfg = filter_config(job, model, init)
+    cfg.extra_noise = gap_noise(imu, imu_report["gaps"])  # bridged IMU gaps
     show = job["outputs"]["progress"] if progress is None else progress
     res = run_filter(imu, init.state, meas, cfg, progress=show)
     out = JobResult(job, inputs, init, windows, res)
@@ -605,6 +608,60 @@ def run_job(job: Job, *, progress: bool | None = None, seed: int | None = None,
         "imu_model": model.name,
         "preprocessing": preprocessing,
         "timing_s": timing,
+        "evaluation": {k: v["summary"] for k, v in out.evaluation.items()},
+    }
+    return out
+
+
+@dataclass
+class PresetResult:
+    """Filter-like result of a preset process (same attributes the outputs use)."""
+
+    forward: pd.DataFrame
+    smoothed: pd.DataFrame | None
+    innovations: pd.DataFrame
+    rejected: pd.DataFrame
+    timing: dict
+    complete: bool = True
+    error: Exception | None = None
+
+
+def _run_foot(job: Job, inputs: Inputs, windows, t_start: float) -> JobResult:
+    """Foot-mounted pedestrian INS (:mod:`insgnss.foot`): compiled ZUPT/ZARU filter and
+    smoother; heading unobservable, so it is given (``[foot] heading``, default 0)."""
+    from .foot import FootConfig, run_foot_ins
+
+    cfg = FootConfig.from_dict(job["foot"])
+    ini = job["initialization"]
+    lat = np.radians(ini["lat_deg"] or 0.0)
+    lon = np.radians(ini["lon_deg"] or 0.0)
+    h = ini["height"] or 0.0
+    c0 = _time.perf_counter()
+    fr = run_foot_ins(inputs.imu, cfg, lat=lat, lon=lon, height=h)
+    run_s = _time.perf_counter() - c0
+    inn = fr.innovations.reset_index()
+    inn = inn.rename(columns={inn.columns[0]: "time"})
+    inn.insert(1, "type", "zupt")
+    inn["accepted"] = True
+    res = PresetResult(forward=fr.forward.join(fr.std).join(fr.biases),
+                       smoothed=fr.trajectory if cfg.smooth else None, innovations=inn,
+                       rejected=inn.iloc[:0], timing={"total": run_s})
+    init = Initialization(fr.initial, "foot_levelling", "given")
+    out = JobResult(job, inputs, init, windows, res)
+    for name in ("forward", "smoothed"):
+        ev = evaluate_solution(getattr(res, name), inputs, windows, job)
+        if ev:
+            out.evaluation[name] = ev
+    out.summary = {
+        "job": job["job"]["name"], "source": inputs.source, "complete": True, "error": None,
+        "preset": "foot", "imu_samples": int(len(inputs.imu)), "zupt_updates": fr.n_updates,
+        "initialization": {"method": "foot_levelling", "heading_source": "given",
+                           "time": fr.initial.time,
+                           "roll_deg": float(np.degrees(fr.initial.euler[0])),
+                           "pitch_deg": float(np.degrees(fr.initial.euler[1])),
+                           "heading_deg": float(np.degrees(fr.initial.euler[2]))},
+        "measurements": {"zupt": int(fr.stillness.still.sum())}, "rejected": {},
+        "timing_s": {"total": run_s, "job_total": _time.perf_counter() - t_start},
         "evaluation": {k: v["summary"] for k, v in out.evaluation.items()},
     }
     return out

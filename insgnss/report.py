@@ -161,7 +161,8 @@ def innovation_figure(result):
         ax[i, 0].axhline(3, color="k", lw=0.5, ls="--")
         ax[i, 0].axhline(-3, color="k", lw=0.5, ls="--")
         ax[i, 0].grid(True, alpha=0.3)
-        ax[i, 0].legend(fontsize=7, loc="upper right", markerscale=3)
+        if ax[i, 0].get_legend_handles_labels()[0]:
+            ax[i, 0].legend(fontsize=7, loc="upper right", markerscale=3)
     ax[-1, 0].set_xlabel("time [s]")
     return fig
 
