@@ -86,7 +86,8 @@ class FilterConfig:
     gate_probabilities : dict
         Per measurement type (``Measurement.name``) overrides.
     gate_recovery : float or None
-        When every measurement of one type has been rejected for longer than this [s], the
+        When every measurement of one type has been rejected for longer than this [s] (an
+        unbroken run of at least 3 rejections, with no gap longer than this between them), the
         filter's covariance is taken to be wrong, not the measurements: the navigation blocks
         (position, velocity, attitude) of ``P`` are inflated until the measurement sits on the
         gate and it is applied (logged with ``recovered=True``). ``None`` disables it (a filter
@@ -113,6 +114,11 @@ class FilterConfig:
         Largest allowed median ``NIS / dof`` over the window.
     nis_min_count : int
         Measurements of one type needed in the window before the check applies.
+    extra_noise : DataFrame or None
+        Extra process noise at given times, e.g. for IMU gaps the mechanization bridged
+        (:func:`insgnss.policies.gap_noise`): indexed by time [s] with columns ``pos_std``
+        [m], ``vel_std`` [m/s], ``att_std`` [rad] (the same on every axis); each row's variances
+        are added to ``Qd`` of the propagation segment that contains its time.
     """
 
     imu_model: ImuErrorModel | str = "tactical"
@@ -142,6 +148,7 @@ class FilterConfig:
     nis_window: float | None = 30.0
     nis_bound: float = 25.0
     nis_min_count: int = 10
+    extra_noise: pd.DataFrame | None = None
 
     def validate(self) -> None:
         if self.bias_model not in BIAS_MODELS:
@@ -398,13 +405,19 @@ def run_filter(
     par_decay = pm.decay[9:].copy()
     has_decay = bool(np.any(par_decay > 0))
     I_n = np.eye(n)
+    if config.extra_noise is not None and len(config.extra_noise):
+        xn_t = np.asarray(config.extra_noise.index, float)
+        xn_var = config.extra_noise[["pos_std", "vel_std", "att_std"]].to_numpy(float) ** 2
+    else:
+        xn_t, xn_var = np.empty(0), np.empty((0, 3))
+    xn_i = int(np.searchsorted(xn_t, ep_t[0], side="right"))
 
     nav = NominalState()
     nav.layout = layout
     nav.gyro_psd = pm.gyro_psd
     gate_cache: dict = {}
     log = []  # (time, type, dof, nis, threshold, accepted, y, s)
-    streak: dict = {}  # measurement type -> time of its first rejection since an acceptance
+    streak: dict = {}  # measurement type -> [first, last rejection time, count] of its streak
     nis_hist: dict = {}  # measurement type -> deque of (time, NIS / dof) for the runaway check
     nis_check = config.check_health and config.nis_window is not None
     recoveries: list = []
@@ -436,6 +449,13 @@ def run_filter(
                     pnom *= np.exp(-par_decay * seg_dur)
                 c1 = perf()
                 kernels.discretize(Fint, Qint, sub_dt, n_sub, pm.decay, pm.qdiag, method, Phi, Qd)
+                if xn_i < xn_t.size and xn_t[xn_i] <= te:
+                    Qd = Qd.copy()
+                    while xn_i < xn_t.size and xn_t[xn_i] <= te:
+                        for blk in range(3):  # position, velocity, attitude
+                            i3 = np.arange(3 * blk, 3 * blk + 3)
+                            Qd[i3, i3] += xn_var[xn_i, blk]
+                        xn_i += 1
                 x, P = kf_predict(x, P, Phi, Qd)
                 if config.check_health:
                     if not np.isfinite(pos.sum() + vel.sum() + C.sum()):
@@ -496,8 +516,18 @@ def run_filter(
                     if ok:
                         streak.pop(m.name, None)
                     elif np.isfinite(nis):
-                        t_first = streak.setdefault(m.name, te)
-                        if config.gate_recovery is not None and te - t_first > config.gate_recovery:
+                        # a streak is an unbroken run of rejections of one type: a gap longer
+                        # than the recovery time without any (e.g. between two stops for ZUPT)
+                        # starts a new one, so sparse measurements are not force-applied
+                        rec = streak.get(m.name)
+                        if rec is None or (config.gate_recovery is not None
+                                           and te - rec[1] > config.gate_recovery):
+                            rec = streak[m.name] = [te, te, 0]
+                        rec[1] = te
+                        rec[2] += 1
+                        t_first = rec[0]
+                        if config.gate_recovery is not None and rec[2] >= 3 and \
+                                te - t_first > config.gate_recovery:
                             P = _inflate_for(P, H, R, z, thr)
                             S = H @ P @ H.T + R
                             nis = kernels.nis(S, z)
