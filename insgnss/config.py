@@ -60,6 +60,8 @@ SCHEMA: dict[str, Any] = {
                                 "them, or process the segments separately (docs/jobs.md, "
                                 "Robustness)", choices=["error", "bridge", "split"]),
             "max_gap": _spec(_NUM, 1.0, "longest gap bridged with a warning [s]"),
+            "gap_noise": _spec(bool, True, "add process noise for the motion missed in bridged "
+                               "gaps (rate tables; insgnss.policies.gap_noise)"),
             "duplicates": _spec(str, "drop", "repeated time stamps: drop with a warning (first "
                                 "kept) or stop", choices=["drop", "error"]),
         },
@@ -125,8 +127,10 @@ SCHEMA: dict[str, Any] = {
         "gnss_velocity_std": _spec(_NUM, None, "override per-epoch std [m/s]"),
         "gnss_std_scale": _spec(_NUM, 1.0, "multiplies the file's std"),
         "gnss_min_std": _spec(_NUM, 0.005, "floor of the position std [m]"),
-        "q_scale": _spec(dict, {"1": 1.0, "2": 5.0, "5": 20.0},
-                         "std multiplier per RTKLIB Q flag (missing flag: epoch dropped)"),
+        "q_scale": _spec(dict, {"1": 1.0, "2": 3.0, "3": 1.0, "4": 1.0, "5": 1.0, "6": 1.0},
+                         "std multiplier per RTKLIB Q flag (1 fix, 2 float, 3 SBAS, 4 DGPS, "
+                         "5 single, 6 PPP; a flag not listed drops its epochs); float "
+                         "solutions' std are optimistic"),
         "zupt": _spec(bool, False),
         "zaru": _spec(bool, False),
         "zupt_std": _spec(_NUM, 0.02),
