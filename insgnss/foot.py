@@ -68,7 +68,7 @@ from .detect import DetectorConfig, Stillness, detect_arrays, imu_rates
 from .earth import OMEGA_E, radii
 from .errors import AlignmentError, ConfigError
 from .imu import increments
-from .mechanization.strapdown import NAV_COLS, NavState, strapdown_step
+from .mechanization.strapdown import NAV_COLS, STEP_WORK_SHAPE, NavState, strapdown_step
 
 N_STATES = 15
 IP, IV, IA, IG, IB = 0, 3, 6, 9, 12  # block offsets: position, velocity, attitude, gyro, accel bias
@@ -274,7 +274,7 @@ def zupt_filter_kernel(t, dth, dv, rate, still, zaru, pos0, vel0, C0, bg0, ba0, 
     work = np.empty((4, 3, 3))
     # separate scratch for the strapdown kernel (its size is private to strapdown_step; 16 is
     # generous)
-    sd_work = np.empty((16, 3, 3))
+    sd_work = np.empty(STEP_WORK_SHAPE)
     dthc = np.empty(3)
     dvc = np.empty(3)
     f = np.empty(3)

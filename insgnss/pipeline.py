@@ -412,7 +412,7 @@ def stillness_times(job: Job, imu: pd.DataFrame) -> np.ndarray:
         from .detect import DetectorConfig, detect_stillness
 
         cfg = DetectorConfig.from_dict(a["detector"]) if a["detector"] else \
-            DetectorConfig(method="amv", window=0.5, threshold=0.1, min_stance=1.0)
+            DetectorConfig(method="amv", window=0.5, threshold=0.1, min_stance=1.0, margin=0.3)
         still |= detect_stillness(imu, cfg).still.to_numpy(bool)
     for a0, a1 in a["static_intervals"] or []:
         still |= (t >= a0) & (t <= a1)
@@ -577,7 +577,8 @@ def run_job(job: Job, *, progress: bool | None = None, seed: int | None = None,
     imu = inputs.imu.loc[init.state.time:]
     meas = build_measurements(job, inputs, windows, imu)
     cfg = filter_config(job, model, init)
-    cfg.extra_noise = gap_noise(imu, imu_report["gaps"])  # bridged IMU gaps
+    if job["inputs"]["imu"]["gap_noise"]:
+        cfg.extra_noise = gap_noise(imu, imu_report["gaps"])  # bridged IMU gaps
     show = job["outputs"]["progress"] if progress is None else progress
     res = run_filter(imu, init.state, meas, cfg, progress=show)
     out = JobResult(job, inputs, init, windows, res)

@@ -18,7 +18,7 @@ from numba import njit
 
 from ..attitude import rotvec_to_dcm_nb
 from ..earth import radii
-from ..mechanization.strapdown import strapdown_step
+from ..mechanization.strapdown import STEP_WORK_SHAPE, strapdown_step
 from .models import accumulate_error_dynamics
 
 DISC_SECOND_ORDER = 0
@@ -80,7 +80,7 @@ def propagate_nominal(t, dth, dv, j, frac, t_end, pos, vel, C, pnom, i_sg, i_sa,
     """
     n_t = t.shape[0]
     n = Fint.shape[1]
-    work = np.empty((7, 3, 3))  # strapdown_step scratch (see its docstring)
+    work = np.empty(STEP_WORK_SHAPE)  # strapdown_step scratch
     dthc = np.empty(3)
     dvc = np.empty(3)
     sum_th = np.zeros(3)

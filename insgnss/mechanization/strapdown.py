@@ -52,6 +52,9 @@ from ..imu import compensation_matrix, coning_sculling, increments
 
 NAV_COLS = ["lat", "lon", "height", "vel_e", "vel_n", "vel_u", "roll", "pitch", "heading"]
 
+#: shape of the scratch array :func:`strapdown_step` needs (``np.empty(STEP_WORK_SHAPE)``)
+STEP_WORK_SHAPE = (7, 3, 3)
+
 #: attitude update identifiers used by the kernel
 ATTITUDE_EXACT = 0
 ATTITUDE_FIRST_ORDER = 1
@@ -133,7 +136,7 @@ def _matmul3(A, B, out):
 def strapdown_step(pos, vel, C, dth, dv, dt, gravity_model, attitude_update, fix_height, work):
     """Advance ``pos = [lat, lon, h]``, ``vel`` (ENU) and ``C`` (C_b^l) in place by one interval.
 
-    ``work`` is a (7, 3, 3) scratch array (avoids allocations in the hot loop).
+    ``work`` is a scratch array of shape :data:`STEP_WORK_SHAPE` (no allocation per sample).
     """
     lat, lon, h = pos[0], pos[1], pos[2]
     ve, vn, vu = vel[0], vel[1], vel[2]
@@ -196,7 +199,7 @@ def _mechanize_kernel(t, dth, dv, pos0, vel0, C0, gravity_model, attitude_update
     pos = pos0.copy()
     vel = vel0.copy()
     C = C0.copy()
-    work = np.empty((7, 3, 3))
+    work = np.empty(STEP_WORK_SHAPE)
     n = t.shape[0]
     for k in range(n):
         if k > 0:
@@ -327,7 +330,7 @@ class INSMechanization:
         self._t_first: float | None = None
         self._prev: np.ndarray | None = None  # last compensated sample (t, w, f)
         self.time = 0.0
-        self._work = np.empty((7, 3, 3))
+        self._work = np.empty(STEP_WORK_SHAPE)
 
     # --- processing ---
     def compensate_errors_and_compute_params(self, measurement) -> np.ndarray:
