@@ -133,3 +133,14 @@ def test_sigkill_of_the_trajectory_writer(tmp_path):
         assert sum(1 for _ in target.open()) == n + 1
     else:
         assert not target.exists()
+
+
+def test_atomic_write_gives_the_usual_file_mode(tmp_path):
+    import os
+
+    from insgnss.io.native import atomic_write_text
+
+    umask = os.umask(0)
+    os.umask(umask)
+    p = atomic_write_text(tmp_path / "out.txt", "x")
+    assert os.stat(p).st_mode & 0o777 == 0o666 & ~umask

@@ -21,6 +21,9 @@ import pandas as pd
 
 from ..errors import InputFormatError
 
+_UMASK = os.umask(0)
+os.umask(_UMASK)
+
 #: DataFrame columns (radians) written in degrees with a ``_deg`` suffix
 ANGLE_COLUMNS = ("lat", "lon", "roll", "pitch", "heading", "roll_std", "pitch_std",
                  "heading_std", "yaw", "yaw_std")
@@ -41,6 +44,7 @@ def atomic_write(path: str | os.PathLike, write: Callable[[Path], None]) -> Path
         write(tmp_path)
         with open(tmp_path, "rb+") as fh:
             os.fsync(fh.fileno())
+        os.chmod(tmp_path, 0o666 & ~_UMASK)  # mkstemp creates 0600; give the usual mode
         os.replace(tmp_path, path)
     except BaseException:
         tmp_path.unlink(missing_ok=True)
