@@ -306,14 +306,17 @@ def _check(x, P, time, what, full=True):
 
 def _runaway_nis(hist: dict, name: str, time: float, nnis: float, config: FilterConfig) -> None:
     """Record one normalized NIS and raise FilterHealthError when its window median runs away."""
-    q = hist.get(name)
-    if q is None:
-        q = hist[name] = deque()
+    rec = hist.get(name)
+    if rec is None:
+        rec = hist[name] = [deque(), -np.inf]
+    q = rec[0]
     q.append((time, nnis if np.isfinite(nnis) else np.inf))
     while q and q[0][0] < time - config.nis_window:
         q.popleft()
-    if len(q) < config.nis_min_count:
+    # the median is taken at most once per second per type (a 10 Hz NHC keeps ~300 values)
+    if len(q) < config.nis_min_count or time - rec[1] < 1.0:
         return
+    rec[1] = time
     vals = sorted(v for _, v in q)  # exact median; sorted() beats np.median on ~30 values
     k = len(vals) // 2
     med = vals[k] if len(vals) % 2 else 0.5 * (vals[k - 1] + vals[k])
