@@ -112,6 +112,71 @@ def check_imu_table(imu: pd.DataFrame, policy: GapPolicy, duplicates: str = "dro
     return out, report
 
 
+#: moving-average length [s] that removes sensor noise and vibration from the rates before
+#: their typical change over a gap is measured (gap_noise)
+GAP_SMOOTHING = 0.1
+
+
+def gap_noise(imu: pd.DataFrame, gaps: list[dict]) -> pd.DataFrame | None:
+    """Extra process noise for the bridged gaps of a rate IMU table.
+
+    Across a gap of ``T`` seconds the mechanization integrates the straight line between the
+    samples on either side (trapezoid); the motion in between is unknown. The error of the
+    mean rate is taken as half the larger of (a) the change across the gap of the rates
+    smoothed over :data:`GAP_SMOOTHING` s (the samples' own noise is already in ARW/VRW) and (b)
+    the RMS change over ``T`` of the rates smoothed over :data:`GAP_SMOOTHING` s, over the
+    whole log (the vehicle's typical dynamics at that time scale, without the sensor noise
+    that ARW/VRW already model). Per axis::
+
+        att_std = T * max(|dw_ends|, rms_dw(T)) / 2     vel_std = T * max(|df_ends|, rms_df(T)) / 2
+        pos_std = vel_std * T / 2
+
+    Returns a table for :attr:`insgnss.filter.engine.FilterConfig.extra_noise` (time = end of
+    each bridged gap) or None (no bridged gap, or an increment table: an accumulating sensor's
+    first increment after a gap covers the gap).
+    """
+    from .imu import ACCEL_COLS, GYRO_COLS
+
+    bridged = [g for g in gaps if g.get("action") == "bridged"]
+    if not bridged or GYRO_COLS[0] not in imu.columns:
+        return None
+    t = np.asarray(imu.index, float)
+    w = imu[GYRO_COLS].to_numpy(float)
+    f = imu[ACCEL_COLS].to_numpy(float)
+    dt = float(np.median(np.diff(t)))
+    m = min(max(int(round(GAP_SMOOTHING / dt)), 1), t.size)
+
+    def moving_mean(x):  # mean of x[i:i + m] for i = 0 .. N - m (no edge effects)
+        c = np.concatenate([np.zeros((1, 3)), np.cumsum(x, 0)])
+        return (c[m:] - c[:-m]) / m
+
+    ws, fs = moving_mean(w), moving_mean(f)
+    rows = []
+    typical: dict = {}  # lag -> RMS change of the smoothed rates over that lag
+    for g in bridged:
+        k = int(np.searchsorted(t, g["end"]))
+        if k <= 0 or k >= t.size:
+            continue
+        T = float(g["duration"])
+        lag = max(int(round(T / dt)), 1)
+        if lag not in typical:
+            typical[lag] = (float(np.sqrt(np.mean((ws[lag:] - ws[:-lag]) ** 2))),
+                            float(np.sqrt(np.mean((fs[lag:] - fs[:-lag]) ** 2)))) \
+                if lag < len(ws) else (0.0, 0.0)
+        rms_w, rms_f = typical[lag]
+        # smoothed rates just before and just after the gap
+        before, after = max(k - m, 0), min(k, len(ws) - 1)
+        dw = float(np.max(np.abs(ws[after] - ws[before])))
+        df = float(np.max(np.abs(fs[after] - fs[before])))
+        vel = T * max(df, rms_f) / 2
+        rows.append((t[k], vel * T / 2, vel, T * max(dw, rms_w) / 2))
+    if not rows:
+        return None
+    a = np.asarray(rows)
+    return pd.DataFrame({"pos_std": a[:, 1], "vel_std": a[:, 2], "att_std": a[:, 3]},
+                        index=pd.Index(a[:, 0], name="time"))
+
+
 def shift_report(report: dict, dt: float) -> dict:
     """The report of :func:`check_imu_table` with its times moved by ``dt`` [s] (an IMU time
     offset applied after the check)."""
@@ -262,4 +327,5 @@ def _merge_filter(parts):
                    params=stack("params"), final=fs[-1].final)
 
 
-__all__ = ["MIN_SEGMENT_SAMPLES", "check_imu_table", "gap_policy", "run_segments", "shift_report"]
+__all__ = ["MIN_SEGMENT_SAMPLES", "check_imu_table", "gap_noise", "gap_policy", "run_segments",
+           "shift_report"]

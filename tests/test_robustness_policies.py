@@ -94,7 +94,6 @@ def test_gap_bridged_with_a_warning_and_recorded(files, tmp_path):
 
 
 def test_split_processes_the_segments_separately(files, tmp_path):
-    bridged, _ = _run(_job(files, "imu_gap.csv", gap_policy="bridge"))
     res, warned = _run(_job(files, "imu_gap.csv", gap_policy="split"))
     assert any("split into 2 segments" in w for w in warned)
     assert res.summary["complete"]
@@ -108,12 +107,20 @@ def test_split_processes_the_segments_separately(files, tmp_path):
         assert set(df["segment"]) == {0, 1}
         assert np.all(np.diff(t) > 0)
     # the second segment restarts from GNSS instead of dead-reckoning 2 s of unknown motion
-    rms_split = res.summary["evaluation"]["smoothed"]["rms_h_m"]
-    rms_bridge = bridged.summary["evaluation"]["smoothed"]["rms_h_m"]
-    assert rms_split < 0.35 and rms_split < rms_bridge
+    assert res.summary["evaluation"]["smoothed"]["rms_h_m"] < 0.35
     paths = write_outputs(res, tmp_path)
     assert "segment" in pd.read_csv(paths["forward.csv"]).columns
     assert len(json.loads((tmp_path / "summary.json").read_text())["segments"]) == 2
+
+
+def test_gap_noise_keeps_a_bridged_gap_honest(files):
+    """Bridging 2 s of driving: without the gap's process noise the filter is overconfident
+    afterwards and its smoothed error more than doubles."""
+    on, _ = _run(_job(files, "imu_gap.csv", gap_policy="bridge"))
+    off, _ = _run(_job(files, "imu_gap.csv", gap_policy="bridge", gap_noise=False))
+    rms_on = on.summary["evaluation"]["smoothed"]["rms_h_m"]
+    rms_off = off.summary["evaluation"]["smoothed"]["rms_h_m"]
+    assert rms_on < 0.35 and rms_off > 2.0 * rms_on
 
 
 def test_duplicated_samples_dropped_or_refused(files):
@@ -184,3 +191,47 @@ def test_policy_keys_are_validated(files):
     with pytest.raises(ConfigError) as e:
         _job(files, "imu_gap.csv", duplicates="keep")
     assert e.value.column == "inputs.imu.duplicates"
+
+
+def test_gap_noise_of_a_rate_step_across_a_gap():
+    from insgnss.policies import gap_noise
+
+    t = np.round(np.arange(0.0, 20.0, 0.01), 10)
+    w = np.zeros((t.size, 3))
+    w[t >= 10.0, 2] = 0.2  # the vehicle starts turning while the logger is away
+    f = np.tile([0.0, 0.0, 9.81], (t.size, 1))
+    keep = ~((t > 9.75) & (t < 10.25))
+    imu = rates_table(t[keep], w[keep], f[keep])
+    gaps = [{"start": 9.75, "end": 10.25, "duration": 0.5, "action": "bridged"}]
+    xn = gap_noise(imu, gaps)
+    assert list(xn.index) == [10.25]
+    assert xn["att_std"].iloc[0] == pytest.approx(0.5 * 0.2 / 2, rel=1e-9)
+    assert xn["vel_std"].iloc[0] < 1e-9 and xn["pos_std"].iloc[0] < 1e-9
+    assert gap_noise(imu, [dict(gaps[0], action="split")]) is None
+    tt, dth, dv = increments(imu)
+    from insgnss.imu import increments_table
+
+    assert gap_noise(increments_table(tt, dth, dv), gaps) is None
+
+
+def test_extra_noise_enters_the_predicted_covariance():
+    from insgnss.filter.engine import run_filter
+    from insgnss.pipeline import build_measurements, filter_config, initialize
+
+    job = small_job()
+    inputs = load_inputs(job)
+    init = initialize(job, inputs, inputs.imu_model)
+    imu = inputs.imu.loc[init.state.time:]
+    meas = build_measurements(job, inputs, [], imu)
+    cfg = filter_config(job, inputs.imu_model, init)
+    cfg.smoother = False
+    r0 = run_filter(imu, init.state, meas, cfg)
+    cfg.extra_noise = pd.DataFrame({"pos_std": [0.1], "vel_std": [0.2], "att_std": [0.01]},
+                                   index=pd.Index([30.05], name="time"))
+    r1 = run_filter(imu, init.state, meas, cfg)
+    e = int(np.searchsorted(r0.epoch_times, 30.05))
+    np.testing.assert_array_equal(r1.P_predicted[:e], r0.P_predicted[:e])
+    d = r1.P_predicted[e] - r0.P_predicted[e]
+    np.testing.assert_allclose(np.diag(d)[:9], [0.01] * 3 + [0.04] * 3 + [1e-4] * 3, rtol=1e-9)
+    d[np.arange(9), np.arange(9)] = 0.0
+    assert np.abs(d).max() < 1e-12
