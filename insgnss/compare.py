@@ -57,11 +57,13 @@ from .filter.engine import FilterConfig, FilterResult, run_filter
 from .filter.measurements import Cupt, GnssPosition, GnssVelocity, Zaru, Zupt
 from .mechanization.strapdown import NAV_COLS, NavState, mechanize
 
-RUNS = ("free", "zupt", "zupt_zaru", "zupt_cupt", "gnss")
+RUNS = ("free", "zupt", "zupt_zaru", "zupt_cupt", "gnss", "job", "job_smoothed")
 LABELS = {"free": "free inertial", "zupt": "ZUPT", "zupt_zaru": "ZUPT+ZARU",
-          "zupt_cupt": "ZUPT+CUPT", "gnss": "GNSS-aided"}
+          "zupt_cupt": "ZUPT+CUPT", "gnss": "GNSS-aided",
+          "job": "job aiding (forward)", "job_smoothed": "job aiding (smoothed)"}
 COLORS = {"free": "tab:red", "zupt": "tab:blue", "zupt_zaru": "tab:green",
-          "zupt_cupt": "tab:purple", "gnss": "tab:gray"}
+          "zupt_cupt": "tab:purple", "gnss": "tab:gray",
+          "job": "tab:cyan", "job_smoothed": "tab:brown"}
 STYLES = {"zupt_zaru": "--"}
 
 
@@ -353,10 +355,16 @@ def _settled_still(t: np.ndarray, still: np.ndarray, settle: float) -> np.ndarra
     return out
 
 
-def _finish(runs, solutions, truth, still, t, settings, filter_results, cupt_times, t0):
+def _finish(runs, solutions, truth, still, t, settings, filter_results, cupt_times, t0,
+            truth_lever_arm=None):
+    from .evaluate import move_point
+
     errors, growth = {}, {}
     for run in runs:
-        e = error_series(solutions[run], truth, settings.eval_rate)
+        sol = solutions[run]
+        if truth_lever_arm is not None and np.any(truth_lever_arm):
+            sol = move_point(sol, truth_lever_arm)  # the reference measures another point
+        e = error_series(sol, truth, settings.eval_rate)
         errors[run] = e
         growth[run] = growth_exponent(e.index.to_numpy(float) - t0,
                                       e["horizontal"].to_numpy(float), settings.fit_window)
@@ -386,6 +394,8 @@ def compare_runs(
     config: FilterConfig | None = None,
     settings: CompareSettings | None = None,
     progress: bool = False,
+    job_solutions: dict[str, pd.DataFrame] | None = None,
+    truth_lever_arm=None,
 ) -> CompareResult:
     """Run the same IMU data with each aiding set and compare the errors against ``truth``.
 
@@ -411,6 +421,12 @@ def compare_runs(
     config : FilterConfig, optional
         Filter configuration shared by all runs.
     settings : CompareSettings, optional
+    job_solutions : dict, optional
+        ``{"job": forward, "job_smoothed": smoothed}`` of the job's own processing (all its
+        aiding and outages, :func:`insgnss.pipeline.run_job`), compared like the other runs.
+    truth_lever_arm : 3-vector, optional
+        Body-frame offset [m, RFU] from the IMU to the point the truth measures (e.g. a GNSS
+        antenna for an RTK reference); the solutions are moved there before comparing.
 
     Returns
     -------
@@ -438,6 +454,8 @@ def compare_runs(
             available.append("zupt_cupt")
     if gnss is not None and len(gnss):
         available.append("gnss")
+    job_solutions = {k: v for k, v in (job_solutions or {}).items() if v is not None}
+    available += [k for k in ("job", "job_smoothed") if k in job_solutions]
     runs = [r for r in (runs or RUNS) if r in available]
     unknown = set(runs) - set(RUNS)
     if unknown:
@@ -485,7 +503,10 @@ def compare_runs(
             if {"vel_e", "vel_n", "vel_u"} <= set(gnss.columns):
                 meas.append(GnssVelocity(gnss, lever_arm=gnss_lever_arm))
             run_one(run, meas)
-    return _finish(runs, solutions, truth, still_arr, t, s, results, cupt_times, float(t[0]))
+        elif run in ("job", "job_smoothed"):
+            solutions[run] = job_solutions[run].loc[t[0]:][NAV_COLS]
+    return _finish(runs, solutions, truth, still_arr, t, s, results, cupt_times, float(t[0]),
+                   truth_lever_arm)
 
 
 # --- foot-mounted: the compiled pedestrian filter ---------------------------------------------

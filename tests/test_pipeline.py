@@ -111,3 +111,17 @@ def test_bundled_demo_runs_end_to_end(tmp_path):
     assert html.count("data:image/png;base64,") >= 4
     for name in ("forward.csv", "smoothed.csv", "forward.kml", "smoothed.geojson"):
         assert (out / name).stat().st_size > 0
+
+
+def test_compare_cli_on_the_drive_job(drive_result, tmp_path):
+    """`insgnss compare` runs free-inertial, GNSS-only and the job's own aided forward and
+    smoothed solutions on the same data (issue 5), with the antenna lever arm applied."""
+    from insgnss.cli import main
+
+    rc = main(["compare", str(REPO / "scenarios" / "drive_0708.toml"), "-o", str(tmp_path),
+               "--runs", "free,job,job_smoothed", "--no-figures"])
+    assert rc == 0
+    s = json.loads((tmp_path / "compare_summary.json").read_text())
+    tab = s["table"]
+    assert tab["free"]["rms_h_err_m"] > 100 * tab["job"]["rms_h_err_m"]
+    assert tab["job_smoothed"]["rms_h_err_m"] < 0.2 < tab["job"]["rms_h_err_m"]

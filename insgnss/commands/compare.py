@@ -93,10 +93,14 @@ def _vehicle(args):
     from ..config import load_job
     from ..detect import DetectorConfig, detect_stillness
     from ..outages import in_windows
-    from ..pipeline import filter_config, initialize, load_inputs, outage_windows
+    from ..pipeline import filter_config, initialize, load_inputs, outage_windows, run_job
 
     job = load_job(args.job)
     inputs = load_inputs(job, args.seed)
+    # the job's own processing (all its aiding, outages and preprocessing; this also applies
+    # the preprocessing, e.g. an estimated IMU time offset, to the inputs the other runs use)
+    jr = run_job(job, progress=False, inputs=inputs)
+    job_solutions = {"job": jr.filter.forward, "job_smoothed": jr.filter.smoothed}
     model = inputs.imu_model
     init = initialize(job, inputs, model)
     imu = inputs.imu.loc[init.state.time:]
@@ -140,7 +144,10 @@ def _vehicle(args):
         settings.max_speed = float(a["zupt_max_speed"])
     res = compare_runs(imu, init.state, truth.loc[init.state.time:], still=still,
                        control_points=cp, gnss=gnss, gnss_lever_arm=inputs.lever_arm,
-                       runs=_runs(args), config=cfg, settings=settings)
+                       runs=_runs(args), config=cfg, settings=settings,
+                       job_solutions=job_solutions,
+                       truth_lever_arm=inputs.lever_arm if inputs.truth is None and
+                       inputs.reference_point == "antenna" else None)
     name = job.simulation.get("scenario", {}).get("name") or job["job"]["name"]
     return res, f"{name} (still samples: {note})"
 
