@@ -565,10 +565,14 @@ def run_job(job: Job, *, progress: bool | None = None, seed: int | None = None,
                            preprocessing=preprocessing)
         out.summary["imu"] = imu_report
         return out
+    other = None
     if job["process"]["preset"] == "foot":
-        return _run_foot(job, inputs, windows, t_start)
-    if job["filter"]["process_model"] == "riss":
-        return _run_riss(job, inputs, windows, model, progress)
+        other = _run_foot(job, inputs, windows, t_start)
+    elif job["filter"]["process_model"] == "riss":
+        other = _run_riss(job, inputs, windows, model, t_start)
+    if other is not None:
+        other.summary.setdefault("imu", imu_report)
+        return other
     init = initialize(job, inputs, model)
     if job["filter"]["noise_from_static"] and init.static_end is not None:
         model = with_static_noise(model, inputs.imu.loc[:init.static_end])
@@ -581,33 +585,40 @@ def run_job(job: Job, *, progress: bool | None = None, seed: int | None = None,
         cfg.extra_noise = gap_noise(imu, imu_report["gaps"])  # bridged IMU gaps
     show = job["outputs"]["progress"] if progress is None else progress
     res = run_filter(imu, init.state, meas, cfg, progress=show)
+    extra = {"imu": imu_report, "preprocessing": preprocessing}
+    return _job_result(job, inputs, init, windows, res, meas, model, len(imu), t_start,
+                       {"read": t_read}, extra)
+
+
+def _job_result(job: Job, inputs: Inputs, init: Initialization, windows, res, meas,
+                model: ImuErrorModel, n_imu: int, t_start: float, timing_extra: dict,
+                extra: dict) -> JobResult:
+    """Evaluate a finished filter run and build its :class:`JobResult` with the summary."""
     out = JobResult(job, inputs, init, windows, res)
     for name in ("forward", "smoothed"):
         ev = evaluate_solution(getattr(res, name), inputs, windows, job)
         if ev:
             out.evaluation[name] = ev
-    timing = dict(res.timing)
-    timing["read"] = t_read
-    timing["job_total"] = _time.perf_counter() - t_start
+    timing = {**res.timing, **timing_extra, "job_total": _time.perf_counter() - t_start}
     name = job["job"]["name"]
     if name == "job" and job.simulation.get("scenario", {}).get("name"):
         name = job.simulation["scenario"]["name"]
+    r, p, h = init.state.euler
     out.summary = {
         "job": name, "source": inputs.source, "seed": inputs.seed,
+        "process_model": job["filter"]["process_model"],
         "complete": bool(res.complete), "error": None if res.error is None else str(res.error),
-        "stopped_at": None if res.complete else float(res.final.time),
-        "imu_samples": int(len(imu)), "imu": imu_report, "initialization": {
+        "stopped_at": None if res.complete or res.final is None else float(res.final.time),
+        "imu_samples": int(n_imu), "initialization": {
             "method": init.method, "heading_source": init.heading_source,
-            "time": init.state.time,
-            "roll_deg": float(np.degrees(init.state.euler[0])),
-            "pitch_deg": float(np.degrees(init.state.euler[1])),
-            "heading_deg": float(np.degrees(init.state.euler[2]))},
+            "time": init.state.time, "roll_deg": float(np.degrees(r)),
+            "pitch_deg": float(np.degrees(p)), "heading_deg": float(np.degrees(h))},
         "measurements": {m.name: int(len(m)) for m in meas},
         "rejected": res.rejected.groupby("type").size().astype(int).to_dict()
         if len(res.rejected) else {},
         "outages": [list(w) for w in windows],
         "imu_model": model.name,
-        "preprocessing": preprocessing,
+        **extra,
         "timing_s": timing,
         "evaluation": {k: v["summary"] for k, v in out.evaluation.items()},
     }
@@ -668,16 +679,37 @@ def _run_foot(job: Job, inputs: Inputs, windows, t_start: float) -> JobResult:
     return out
 
 
-def _run_riss(job, inputs, windows, model, progress):
-    try:
-        from .filter import riss_model
-    except ImportError as exc:  # pragma: no cover
-        raise ConfigError("the RISS process model is not available", column="filter.process_model",
-                          found=str(exc)) from None
-    if not hasattr(riss_model, "run_riss_job"):
-        raise ConfigError("the RISS process model has no pipeline entry point yet",
-                          column="filter.process_model")
-    return riss_model.run_riss_job(job, inputs, windows, model, progress)
+def _run_riss(job: Job, inputs: Inputs, windows, model: ImuErrorModel, t_start: float
+              ) -> JobResult:
+    """``[filter] process_model = "riss"``: the same initialization, aiding, evaluation and
+    summary as the strapdown job, with the RISS process model (:mod:`insgnss.filter.riss_model`);
+    the job's odometer is the process input (``aiding.odometer`` would use it twice)."""
+    from .filter.riss_model import RissConfig, run_riss_filter
+
+    if inputs.odometer is None or not len(inputs.odometer):
+        raise ConfigError("the RISS process model needs an odometer (inputs.odometer.path or a "
+                          "simulated [odometer])", file=job.path, column="inputs.odometer.path")
+    if job["aiding"]["odometer"]:
+        raise ConfigError("with process_model = \"riss\" the odometer is the process input; "
+                          "switch aiding.odometer off", file=job.path, column="aiding.odometer")
+    init = initialize(job, inputs, model)
+    odo = inputs.odometer
+    t_odo = odo.index.to_numpy(float)
+    imu = inputs.imu.loc[max(init.state.time, t_odo[0]):t_odo[-1]]
+    if len(imu) < 2:
+        raise ConfigError("the odometer does not overlap the IMU data", file=job.path,
+                          column="inputs.odometer.path")
+    if float(imu.index[0]) != init.state.time:
+        init.state = init.state.copy()
+        init.state.time = float(imu.index[0])
+    meas = build_measurements(job, inputs, windows, imu)
+    cfg = filter_config(job, model, init)
+    # aiding.odometer_std is the odometer speed noise; filter.scale_factors estimates the
+    # vertical gyro scale factor
+    rcfg = RissConfig(odometer_speed_std=float(job["aiding"]["odometer_std"]),
+                      gyro_scale=bool(job["filter"]["scale_factors"]))
+    res = run_riss_filter(imu, odo, init.state, meas, cfg, rcfg)
+    return _job_result(job, inputs, init, windows, res, meas, model, len(imu), t_start, {}, {})
 
 
 # --- outputs ----------------------------------------------------------------------------------------
