@@ -52,9 +52,11 @@ def throughput(runs: int, dask: bool) -> None:
         rpm = 60.0 * s["runs_ok"] / s["elapsed_s"]
         results[name] = rpm
         per_run = sum(r["elapsed_s"] for r in s["runs"]) / len(s["runs"])
-        print(f"  {name:12s}: {rpm:6.1f} runs/min ({s['elapsed_s']:.1f} s for {runs} runs; "
-              f"{per_run:.2f} s per run in the worker; start-up + warm-up {t_start:.1f} s; "
-              f"load {_load()})")
+        cpu = sum(r["cpu_s"] for r in s["runs"]) / len(s["runs"])
+        ideal = 60.0 * ex.workers / cpu
+        print(f"  {name:12s}: {rpm:6.1f} runs/min ({s['elapsed_s']:.1f} s for {runs} runs; per "
+              f"run in the worker {per_run:.2f} s wall, {cpu:.2f} s CPU -> {ideal:.0f} runs/min "
+              f"on {ex.workers} free core(s); start-up + warm-up {t_start:.1f} s; load {_load()})")
     print(f"  speed-up 2 workers / 1 worker: {results['pool-2'] / results['pool-1']:.2f}x")
 
 

@@ -55,8 +55,8 @@ class TaskError:
 @dataclass
 class Outcome:
     """Result of one task: ``value`` or ``error``; ``label`` identifies it in reports (a seed,
-    a job file); ``elapsed`` is the wall time of the call in the worker [s]; ``worker`` names
-    the worker process (``host:pid``)."""
+    a job file); ``elapsed`` and ``cpu`` are the wall and CPU (process) time of the call in the
+    worker [s]; ``worker`` names the worker process (``host:pid``)."""
 
     index: int
     label: Any = None
@@ -64,6 +64,7 @@ class Outcome:
     error: TaskError | None = None
     elapsed: float = 0.0
     worker: str = ""
+    cpu: float = 0.0
 
     @property
     def ok(self) -> bool:
@@ -82,14 +83,15 @@ def call_guarded(fn: Callable, index: int, label: Any, args: tuple) -> Outcome:
     Runs in the worker, so an exception never reaches the scheduler (which could retry it or
     cancel the batch); ``KeyboardInterrupt``/``SystemExit`` still propagate.
     """
-    t0 = time.perf_counter()
+    t0, c0 = time.perf_counter(), time.process_time()
     try:
         value = fn(*args)
     except Exception as exc:  # noqa: BLE001 - any failure of one run is reported, not raised
         return Outcome(index, label, None,
                        TaskError(type(exc).__name__, str(exc), traceback.format_exc()),
-                       time.perf_counter() - t0, _worker_name())
-    return Outcome(index, label, value, None, time.perf_counter() - t0, _worker_name())
+                       time.perf_counter() - t0, _worker_name(), time.process_time() - c0)
+    return Outcome(index, label, value, None, time.perf_counter() - t0, _worker_name(),
+                   time.process_time() - c0)
 
 
 def _lost(index: int, label: Any, exc: BaseException) -> Outcome:

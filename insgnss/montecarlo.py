@@ -735,7 +735,7 @@ def run_montecarlo(job: Job | dict | str | Path, *, runs: int | None = None,
         "percentile_table": ptab.to_dict(orient="records"),
         **cons,
         "runs": [{"run": o.index, "seed": seeds[o.index], "ok": o.ok,
-                  "elapsed_s": o.elapsed, "worker": o.worker,
+                  "elapsed_s": o.elapsed, "cpu_s": o.cpu, "worker": o.worker,
                   **({"error": str(o.error)} if not o.ok else o.value.summary)}
                  for o in outcomes],
     }
