@@ -89,6 +89,23 @@ def euler_to_dcm(roll, pitch, heading) -> np.ndarray:
     return C
 
 
+@njit(cache=True)
+def euler_to_dcm_nb(roll, pitch, heading, C):
+    """Compiled :func:`euler_to_dcm` for one attitude, written into ``C`` (3x3)."""
+    sr, cr = np.sin(roll), np.cos(roll)
+    sp, cp = np.sin(pitch), np.cos(pitch)
+    sa, ca = np.sin(heading), np.cos(heading)
+    C[0, 0] = ca * cr + sa * sp * sr
+    C[0, 1] = sa * cp
+    C[0, 2] = ca * sr - sa * sp * cr
+    C[1, 0] = -sa * cr + ca * sp * sr
+    C[1, 1] = ca * cp
+    C[1, 2] = -sa * sr - ca * sp * cr
+    C[2, 0] = -cp * sr
+    C[2, 1] = sp
+    C[2, 2] = cp * cr
+
+
 def dcm_to_euler(C) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Roll, pitch, heading [rad] from ``C_b^l`` (seed 000 eqs. 19-21).
 

@@ -63,7 +63,7 @@ from numba import njit
 
 from . import earth
 from .align import level
-from .attitude import euler_to_dcm, rotvec_to_dcm_nb
+from .attitude import euler_to_dcm, euler_to_dcm_nb, rotvec_to_dcm_nb
 from .detect import DetectorConfig, Stillness, detect_arrays, imu_rates
 from .earth import OMEGA_E, radii
 from .errors import AlignmentError, ConfigError
@@ -446,22 +446,7 @@ def zupt_filter_kernel(t, dth, dv, rate, still, zaru, pos0, vel0, C0, bg0, ba0, 
     return nupd
 
 
-@njit(cache=True)
-def euler_to_dcm_into(roll, pitch, heading, C):
-    """Compiled ``C_b^l = Rz(-A) Rx(p) Ry(r)`` written into ``C`` (3x3), the same matrix as
-    :func:`insgnss.attitude.euler_to_dcm`."""
-    cr, sr = np.cos(roll), np.sin(roll)
-    cp, sp = np.cos(pitch), np.sin(pitch)
-    ca, sa = np.cos(heading), np.sin(heading)
-    C[0, 0] = ca * cr + sa * sp * sr
-    C[0, 1] = sa * cp
-    C[0, 2] = ca * sr - sa * sp * cr
-    C[1, 0] = -sa * cr + ca * sp * sr
-    C[1, 1] = ca * cp
-    C[1, 2] = -sa * sr - ca * sp * cr
-    C[2, 0] = -cp * sr
-    C[2, 1] = sp
-    C[2, 2] = cp * cr
+euler_to_dcm_into = euler_to_dcm_nb  # one compiled implementation (insgnss.attitude)
 
 
 # --- configuration ---------------------------------------------------------------------------

@@ -35,6 +35,7 @@ from .evaluate import move_point, outage_metrics, position_errors
 from .filter.engine import FilterConfig, FilterResult, run_filter
 from .filter.measurements import BodyVelocity, Cupt, GnssPosition, GnssVelocity, Zaru, Zupt
 from .imu import ACCEL_COLS, DV_COLS, GYRO_COLS, ImuErrorModel, grade
+from .io.native import jsonable
 from .mechanization.strapdown import NavState, mechanize
 from .outages import in_windows, periodic_windows
 from .policies import check_imu_table, gap_noise, gap_policy, run_segments, shift_report
@@ -782,7 +783,7 @@ def write_outputs(result: JobResult, out_dir: str | Path | None = None) -> dict[
                                   + ([] if complete else [MARKER]))
         from .io.native import atomic_write_text
 
-        atomic_write_text(dest("summary.json"), json.dumps(_jsonable(summary), indent=2) + "\n")
+        atomic_write_text(dest("summary.json"), json.dumps(jsonable(summary), indent=2) + "\n")
         if job["outputs"]["report"]:
             from .report import write_report
 
@@ -794,18 +795,6 @@ def write_outputs(result: JobResult, out_dir: str | Path | None = None) -> dict[
         return outs.commit(complete=complete, reason=reason)
 
 
-def _jsonable(x):
-    if isinstance(x, dict):
-        return {str(k): _jsonable(v) for k, v in x.items()}
-    if isinstance(x, list | tuple):
-        return [_jsonable(v) for v in x]
-    if isinstance(x, np.ndarray):
-        return _jsonable(x.tolist())
-    if isinstance(x, np.generic):
-        return x.item()
-    if isinstance(x, float) and not np.isfinite(x):
-        return None
-    return x
 
 
 def process(job: Job, out_dir: str | Path | None = None, *, progress: bool | None = None

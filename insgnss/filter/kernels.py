@@ -16,7 +16,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from ..attitude import rotvec_to_dcm_nb
+from ..attitude import euler_to_dcm_nb, rotvec_to_dcm_nb
 from ..earth import radii
 from ..mechanization.strapdown import STEP_WORK_SHAPE, strapdown_step
 from .models import accumulate_error_dynamics
@@ -40,21 +40,7 @@ def store_nav(nav_out, j, pos, vel, C):
     nav_out[j, 8] = a + 2.0 * np.pi if a < 0.0 else a
 
 
-@njit(cache=True)
-def _euler_dcm(r, p, a, C):
-    """``C_b^l = Rz(-A) Rx(p) Ry(r)`` (as :func:`insgnss.attitude.euler_to_dcm`) into ``C``."""
-    sr, cr = np.sin(r), np.cos(r)
-    sp, cp = np.sin(p), np.cos(p)
-    sa, ca = np.sin(a), np.cos(a)
-    C[0, 0] = ca * cr + sa * sp * sr
-    C[0, 1] = sa * cp
-    C[0, 2] = ca * sr - sa * sp * cr
-    C[1, 0] = -sa * cr + ca * sp * sr
-    C[1, 1] = ca * cp
-    C[1, 2] = -sa * sr - ca * sp * cr
-    C[2, 0] = -cp * sr
-    C[2, 1] = sp
-    C[2, 2] = cp * cr
+_euler_dcm = euler_to_dcm_nb  # one compiled implementation (insgnss.attitude)
 
 
 @njit(cache=True)

@@ -97,7 +97,37 @@ class ExtraState:
         return [f"{self.name}_{i}" for i in range(self.size)]
 
 
-class StateLayout:
+class NamedBlocks:
+    """Access to the named slices ``_slices`` of an error-state vector (shared by the strapdown
+    and RISS layouts)."""
+
+    _slices: dict[str, slice]
+    n: int
+
+    def __getitem__(self, name: str) -> slice:
+        try:
+            return self._slices[name]
+        except KeyError:
+            raise KeyError(f"no state block {name!r}; layout has {list(self._slices)}") from None
+
+    def __contains__(self, name: str) -> bool:
+        return name in self._slices
+
+    def index(self, name: str) -> int:
+        """First index of a block, -1 if absent."""
+        s = self._slices.get(name)
+        return -1 if s is None else s.start
+
+    @property
+    def blocks(self) -> list[str]:
+        return list(self._slices)
+
+    def __repr__(self) -> str:
+        parts = ", ".join(f"{k}[{s.start}:{s.stop}]" for k, s in self._slices.items())
+        return f"{type(self).__name__}(n={self.n}: {parts})"
+
+
+class StateLayout(NamedBlocks):
     """Named blocks of the error-state vector.
 
     Core blocks ``pos vel att gyro_bias accel_bias`` (15), optionally
@@ -147,28 +177,6 @@ class StateLayout:
             if ex.name == name:
                 return ex
         return None
-
-    def __getitem__(self, name: str) -> slice:
-        try:
-            return self._slices[name]
-        except KeyError:
-            raise KeyError(f"no state block {name!r}; layout has {list(self._slices)}") from None
-
-    def __contains__(self, name: str) -> bool:
-        return name in self._slices
-
-    def index(self, name: str) -> int:
-        """First index of a block, -1 if absent."""
-        s = self._slices.get(name)
-        return -1 if s is None else s.start
-
-    @property
-    def blocks(self) -> list[str]:
-        return list(self._slices)
-
-    def __repr__(self) -> str:
-        parts = ", ".join(f"{k}[{s.start}:{s.stop}]" for k, s in self._slices.items())
-        return f"StateLayout(n={self.n}: {parts})"
 
 
 @dataclass

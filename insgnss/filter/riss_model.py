@@ -115,7 +115,7 @@ from ..mechanization.strapdown import NAV_COLS, NavState
 from . import kernels
 from .engine import FilterConfig, FilterResult
 from .measurements import NominalState, Zaru
-from .models import StateLayout
+from .models import NamedBlocks, StateLayout
 from .smoother import STD_COLS, rts_error_state
 
 __all__ = ["RissConfig", "RissLayout", "run_riss_filter", "riss_process", "PROCESS_MODELS"]
@@ -130,7 +130,7 @@ NB = 9
 W_G, W_X, W_Y, W_OD = range(4)
 
 
-class RissLayout:
+class RissLayout(NamedBlocks):
     """Named blocks of the RISS error state (same interface as :class:`.models.StateLayout`).
 
     Blocks: ``pos`` (3), ``vel`` (3), ``heading`` (1), ``odometer_scale`` (1), ``gyro_bias_z``
@@ -200,27 +200,6 @@ class RissLayout:
             px[1][1], px[2][1], px[3][1] = t0, t0 + 1, t0 + 2
         self.param_x = np.array(px, np.int64)
         self.param_nominal = np.array(self.param_nominal, np.int64)
-
-    def __getitem__(self, name: str) -> slice:
-        try:
-            return self._slices[name]
-        except KeyError:
-            raise KeyError(f"no state block {name!r}; layout has {list(self._slices)}") from None
-
-    def __contains__(self, name: str) -> bool:
-        return name in self._slices
-
-    def index(self, name: str) -> int:
-        s = self._slices.get(name)
-        return -1 if s is None else s.start
-
-    @property
-    def blocks(self) -> list[str]:
-        return list(self._slices)
-
-    def __repr__(self) -> str:
-        parts = ", ".join(f"{k}[{s.start}:{s.stop}]" for k, s in self._slices.items())
-        return f"RissLayout(n={self.n}: {parts})"
 
 
 # --- configuration ----------------------------------------------------------------------------------

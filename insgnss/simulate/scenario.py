@@ -34,7 +34,7 @@ import pandas as pd
 from .. import __version__
 from ..errors import ConfigError
 from ..imu import ImuErrorModel, grade
-from ..io.native import atomic_write_text, write_table
+from ..io.native import atomic_write_text, jsonable, write_table
 from ..mechanization.inverse import inverse_mechanize
 from ..mechanization.strapdown import NAV_COLS
 from .aiding import simulate_gnss, simulate_magnetometer, simulate_odometer
@@ -380,22 +380,10 @@ class SimulationResult:
         meta = dict(self.metadata)
         meta["files"] = {name: FILE_UNITS[name] for name in paths}
         paths["metadata.json"] = atomic_write_text(d / "metadata.json",
-                                                   json.dumps(_jsonable(meta), indent=2) + "\n")
+                                                   json.dumps(jsonable(meta), indent=2) + "\n")
         return paths
 
 
-def _jsonable(x):
-    if isinstance(x, dict):
-        return {str(k): _jsonable(v) for k, v in x.items()}
-    if isinstance(x, list | tuple):
-        return [_jsonable(v) for v in x]
-    if isinstance(x, np.ndarray):
-        return _jsonable(x.tolist())
-    if isinstance(x, np.generic):
-        return x.item()
-    if isinstance(x, float) and not np.isfinite(x):
-        return None
-    return x
 
 
 def _initial_state(truth: pd.DataFrame) -> dict:
