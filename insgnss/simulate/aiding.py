@@ -62,6 +62,7 @@ import pandas as pd
 
 from ..attitude import dcm_to_rotvec, euler_to_dcm
 from ..earth import ecef_to_geodetic, enu_displacement_to_geodetic, geodetic_to_ecef
+from ..outages import periodic_windows as _periodic
 from .sensors import gauss_markov
 
 GNSS_POS_COLS = ["lat", "lon", "height", "east_std", "north_std", "up_std"]
@@ -101,17 +102,11 @@ def _time_mask(tr: np.ndarray, windows) -> np.ndarray:
 
 def periodic_windows(duration: float, start: float, length: float, gap: float,
                      stop_before_end: float = 0.0) -> list[tuple[float, float]]:
-    """Outage windows ``[s, s + length)`` for ``s = start, start + length + gap, ...`` with no
-    outage starting after ``duration - stop_before_end - length``."""
-    if length <= 0 or gap < 0:
-        raise ValueError("periodic outages need length > 0 and gap >= 0")
-    out = []
-    s = start
-    last = duration - stop_before_end - length
-    while s <= last + 1e-9:
-        out.append((s, s + length))
-        s += length + gap
-    return out
+    """Outage windows ``[s, s + length)`` for ``s = start, start + length + gap, ...`` [s from
+    the first sample], with the same rule as processing jobs (:func:`insgnss.outages.
+    periodic_windows`): no outage starts at or after ``duration - stop_before_end``, and one
+    still running there is cut."""
+    return _periodic(0.0, duration, start, length, gap, stop_before_end)
 
 
 def _epochs(t: np.ndarray, rate: float) -> np.ndarray:
