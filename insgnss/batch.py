@@ -145,8 +145,8 @@ class BatchResult:
 
     def write(self, out_dir: str | Path) -> dict[str, Path]:
         """``batch.csv``, ``batch.parquet`` and ``batch.json`` in ``out_dir`` (atomically)."""
-        from .io.native import atomic_write, atomic_write_text
-        from .montecarlo import _jsonable, write_tidy
+        from .io.native import atomic_write, atomic_write_text, jsonable
+        from .montecarlo import write_tidy
 
         out = Path(out_dir)
         out.mkdir(parents=True, exist_ok=True)
@@ -157,7 +157,7 @@ class BatchResult:
         summary["failures"] = self.failures
         summary["files"] = sorted(p.name for p in paths.values()) + ["batch.json"]
         paths["json"] = atomic_write_text(out / "batch.json",
-                                          json.dumps(_jsonable(summary), indent=2) + "\n")
+                                          json.dumps(jsonable(summary), indent=2) + "\n")
         return paths
 
 

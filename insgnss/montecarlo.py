@@ -597,7 +597,7 @@ class MonteCarloResult:
 
     def write(self, out_dir: str | Path, figures: bool = True) -> dict[str, Path]:
         """Write the tables, ``summary.json`` and the figures into ``out_dir`` (atomically)."""
-        from .io.native import atomic_write_text
+        from .io.native import atomic_write_text, jsonable
 
         out = Path(out_dir)
         out.mkdir(parents=True, exist_ok=True)
@@ -617,7 +617,7 @@ class MonteCarloResult:
         summary = dict(self.summary)
         summary["files"] = sorted(p.name for p in [*paths.values(), out / "summary.json"])
         paths["summary"] = atomic_write_text(out / "summary.json",
-                                             json.dumps(_jsonable(summary), indent=2) + "\n")
+                                             json.dumps(jsonable(summary), indent=2) + "\n")
         return paths
 
 
@@ -632,20 +632,6 @@ def write_tidy(df: pd.DataFrame, path: Path) -> Path:
         return atomic_write(path, lambda p: df.to_csv(p, index=False))
     return atomic_write(path, lambda p: df.to_parquet(p, engine="pyarrow", index=False,
                                                       compression="zstd"))
-
-
-def _jsonable(x):
-    if isinstance(x, dict):
-        return {str(k): _jsonable(v) for k, v in x.items()}
-    if isinstance(x, list | tuple):
-        return [_jsonable(v) for v in x]
-    if isinstance(x, np.ndarray):
-        return _jsonable(x.tolist())
-    if isinstance(x, np.generic):
-        return _jsonable(x.item())
-    if isinstance(x, float) and not np.isfinite(x):
-        return None
-    return x
 
 
 # --- driver ------------------------------------------------------------------------------------
