@@ -232,7 +232,7 @@ class Initialization:
     heading_source: str
     gyro_bias: np.ndarray | None = None
     att_std: tuple[float, float, float] = (np.radians(0.5), np.radians(0.5), np.radians(2.0))
-    pos_std: float = 1.0
+    pos_std: float | tuple = 1.0
     vel_std: float = 0.1
     static_end: float | None = None
 
@@ -277,9 +277,10 @@ def initialize(job: Job, inputs: Inputs, model: ImuErrorModel) -> Initialization
         return np.array([r["lat"], r["lon"], r["height"]])
 
     pos_std = ini["position_std"]
-    if pos_std is None:
-        pos_std = float(np.nanmedian(gnss["east_std"])) if gnss is not None and \
-            "east_std" in gnss.columns else 1.0
+    if pos_std is None:  # the GNSS sigmas of the start, per axis (east, north, up)
+        cols = ("east_std", "north_std", "up_std")
+        pos_std = tuple(float(np.nanmedian(gnss[c])) for c in cols) if gnss is not None and \
+            all(c in gnss.columns for c in cols) else 1.0
     if method == "gnss_velocity":
         if gnss is None or "vel_e" not in gnss.columns:
             raise ConfigError("gnss_velocity initialization needs GNSS velocity", file=job.path,
@@ -433,6 +434,9 @@ def build_measurements(job: Job, inputs: Inputs, windows, imu: pd.DataFrame) -> 
     gnss = inputs.gnss
     if gnss is not None and len(gnss):
         g = check_gnss_in_imu_span(gnss, imu, policy="trim")  # warns, names the file/lines
+        # the initial position comes from the GNSS at the first IMU time: an epoch there would
+        # be used twice (initial state and update), with correlated errors
+        g = g[g.index > imu.index[0] + 1e-6]
         g = g[~in_windows(g.index.to_numpy(float), windows)]
         scale = {int(float(k)): float(v) for k, v in a["q_scale"].items()}
         use_q = list(scale) if "q" in g.columns else None
