@@ -57,13 +57,16 @@ from .filter.engine import FilterConfig, FilterResult, run_filter
 from .filter.measurements import Cupt, GnssPosition, GnssVelocity, Zaru, Zupt
 from .mechanization.strapdown import NAV_COLS, NavState, mechanize
 
-RUNS = ("free", "zupt", "zupt_zaru", "zupt_cupt", "gnss", "job", "job_smoothed")
+RUNS = ("free", "zupt", "zupt_zaru", "zupt_cupt", "gnss", "job", "job_smoothed", "riss",
+        "riss_smoothed")
 LABELS = {"free": "free inertial", "zupt": "ZUPT", "zupt_zaru": "ZUPT+ZARU",
           "zupt_cupt": "ZUPT+CUPT", "gnss": "GNSS-aided",
-          "job": "job aiding (forward)", "job_smoothed": "job aiding (smoothed)"}
+          "job": "job aiding (forward)", "job_smoothed": "job aiding (smoothed)",
+          "riss": "RISS, job aiding (forward)", "riss_smoothed": "RISS, job aiding (smoothed)"}
 COLORS = {"free": "tab:red", "zupt": "tab:blue", "zupt_zaru": "tab:green",
           "zupt_cupt": "tab:purple", "gnss": "tab:gray",
-          "job": "tab:cyan", "job_smoothed": "tab:brown"}
+          "job": "tab:cyan", "job_smoothed": "tab:brown", "riss": "tab:olive",
+          "riss_smoothed": "tab:pink"}
 STYLES = {"zupt_zaru": "--"}
 
 
@@ -423,7 +426,8 @@ def compare_runs(
     settings : CompareSettings, optional
     job_solutions : dict, optional
         ``{"job": forward, "job_smoothed": smoothed}`` of the job's own processing (all its
-        aiding and outages, :func:`insgnss.pipeline.run_job`), compared like the other runs.
+        aiding and outages, :func:`insgnss.pipeline.run_job`), and ``riss``/``riss_smoothed``
+        for the same job with the RISS process model, compared like the other runs.
     truth_lever_arm : 3-vector, optional
         Body-frame offset [m, RFU] from the IMU to the point the truth measures (e.g. a GNSS
         antenna for an RTK reference); the solutions are moved there before comparing.
@@ -455,7 +459,8 @@ def compare_runs(
     if gnss is not None and len(gnss):
         available.append("gnss")
     job_solutions = {k: v for k, v in (job_solutions or {}).items() if v is not None}
-    available += [k for k in ("job", "job_smoothed") if k in job_solutions]
+    available += [k for k in ("job", "job_smoothed", "riss", "riss_smoothed")
+                  if k in job_solutions]
     runs = [r for r in (runs or RUNS) if r in available]
     unknown = set(runs) - set(RUNS)
     if unknown:
@@ -503,7 +508,7 @@ def compare_runs(
             if {"vel_e", "vel_n", "vel_u"} <= set(gnss.columns):
                 meas.append(GnssVelocity(gnss, lever_arm=gnss_lever_arm))
             run_one(run, meas)
-        elif run in ("job", "job_smoothed"):
+        elif run in ("job", "job_smoothed", "riss", "riss_smoothed"):
             solutions[run] = job_solutions[run].loc[t[0]:][NAV_COLS]
     return _finish(runs, solutions, truth, still_arr, t, s, results, cupt_times, float(t[0]),
                    truth_lever_arm)

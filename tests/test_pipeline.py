@@ -125,3 +125,16 @@ def test_compare_cli_on_the_drive_job(drive_result, tmp_path):
     tab = s["table"]
     assert tab["free"]["rms_h_err_m"] > 100 * tab["job"]["rms_h_err_m"]
     assert tab["job_smoothed"]["rms_h_err_m"] < 0.2 < tab["job"]["rms_h_err_m"]
+
+
+def test_compare_full_imu_against_riss(tmp_path):
+    """`insgnss compare` on a land vehicle with an odometer: the job with the full IMU and with
+    the RISS process model, same data and aiding (issue 7's comparison through the CLI)."""
+    from insgnss.cli import main
+
+    rc = main(["compare", str(REPO / "scenarios" / "land_vehicle_odometer.toml"), "-o",
+               str(tmp_path), "--runs", "job,riss", "--no-figures"])
+    assert rc == 0
+    tab = json.loads((tmp_path / "compare_summary.json").read_text())["table"]
+    # consumer MEMS, two 90 s GNSS outages: RISS drifts far less than the full IMU
+    assert tab["riss"]["max_h_err_m"] < 0.2 * tab["job"]["max_h_err_m"]

@@ -101,6 +101,17 @@ def _vehicle(args):
     # the preprocessing, e.g. an estimated IMU time offset, to the inputs the other runs use)
     jr = run_job(job, progress=False, inputs=inputs)
     job_solutions = {"job": jr.filter.forward, "job_smoothed": jr.filter.smoothed}
+    if inputs.odometer is not None and len(inputs.odometer) and \
+            job["filter"]["process_model"] != "riss":
+        # the same job with the RISS process model (odometer as its input)
+        import copy
+
+        job_r = copy.deepcopy(job)
+        job_r.settings["filter"]["process_model"] = "riss"
+        job_r.settings["aiding"]["odometer"] = False
+        job_r.settings["inputs"]["imu"]["estimate_time_offset"] = False  # already applied
+        jr_r = run_job(job_r, progress=False, inputs=inputs)
+        job_solutions.update(riss=jr_r.filter.forward, riss_smoothed=jr_r.filter.smoothed)
     model = inputs.imu_model
     init = initialize(job, inputs, model)
     imu = inputs.imu.loc[init.state.time:]
