@@ -178,6 +178,9 @@ SCHEMA: dict[str, Any] = {
         "scale_factors": _spec(bool, False),
         "smoother": _spec(bool, True),
         "coning": _spec(bool, False),
+        "levelling_correlation": _spec(bool, False, "static initialization: correlate the "
+                                       "levelled tilt with the accelerometer-bias states in P0 "
+                                       "(FilterConfig.levelling_correlation; experimental)"),
         "noise_from_static": _spec(bool, False, "raise ARW/VRW to the noise measured in the "
                                    "static initialization window (vibration)"),
         "imu_grade": _spec(str, None, "IMU error model for the filter: navigation, tactical, "

@@ -235,6 +235,7 @@ class Initialization:
     pos_std: float | tuple = 1.0
     vel_std: float = 0.1
     static_end: float | None = None
+    levelled: bool = False  # roll/pitch from accelerometer levelling (tilt ~ accel bias)
 
 
 def _mean_specific_force(win: pd.DataFrame) -> np.ndarray:
@@ -330,8 +331,16 @@ def initialize(job: Job, inputs: Inputs, model: ImuErrorModel) -> Initialization
     w_mean = win[GYRO_COLS].to_numpy().mean(0) if GYRO_COLS[0] in win.columns else None
     t_end = res.time
     hdg = res.heading
-    att_std = (max(res.roll_std, np.radians(0.1)), max(res.pitch_std, np.radians(0.1)),
-               res.heading_std if np.isfinite(res.heading_std) else np.radians(5.0))
+    if job["filter"]["levelling_correlation"]:
+        # the tilt error of levelling is the horizontal accelerometer bias over g, modelled as
+        # a correlation with the bias states (FilterConfig.levelling_correlation): the tilt
+        # sigma here is only the white-noise part (VRW over the window), floored at 0.02 deg
+        T = max(float(win.index[-1] - win.index[0]), 1e-3)
+        tilt = max(model.accel_vrw / np.sqrt(T) / 9.81, np.radians(0.02))
+        tilt = (tilt, tilt)
+    else:
+        tilt = (max(res.roll_std, np.radians(0.1)), max(res.pitch_std, np.radians(0.1)))
+    att_std = (*tilt, res.heading_std if np.isfinite(res.heading_std) else np.radians(5.0))
     if src == "gnss_course":
         hdg = _heading_from_course(imu, gnss, res, ini["min_speed"], w_mean)
         att_std = (att_std[0], att_std[1], np.radians(3.0))
@@ -345,7 +354,8 @@ def initialize(job: Job, inputs: Inputs, model: ImuErrorModel) -> Initialization
     t_begin = float(win.index[0])
     st = NavState(*position_at(t_begin, C), np.zeros(3), C, t_begin)
     return Initialization(st, method, src, gyro_bias=None, att_std=att_std, pos_std=pos_std,
-                          vel_std=0.02, static_end=t_end)
+                          vel_std=0.02, static_end=t_end,
+                          levelled=bool(job["filter"]["levelling_correlation"]))
 
 
 def _heading_from_course(imu, gnss, res, min_speed, w_mean) -> float:
@@ -503,6 +513,7 @@ def filter_config(job: Job, model: ImuErrorModel, init: Initialization) -> Filte
         discretization=f["discretization"], gate_probability=f["gate_probability"] or None,
         smoother=f["smoother"], initial_pos_std=init.pos_std, initial_vel_std=init.vel_std,
         initial_att_std=init.att_std, coning=f["coning"],
+        levelling_correlation=init.levelled,
         gate_recovery=f["gate_recovery"] or None, nis_window=f["nis_window"] or None,
         nis_bound=f["nis_bound"],
         gyro_bias=None if init.gyro_bias is None else tuple(init.gyro_bias))

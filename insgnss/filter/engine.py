@@ -85,6 +85,12 @@ class FilterConfig:
         Default chi-square gating probability; ``None`` or 0 disables gating.
     gate_probabilities : dict
         Per measurement type (``Measurement.name``) overrides.
+    levelling_correlation : bool
+        The initial roll and pitch come from accelerometer levelling with the initial nominal
+        accelerometer bias: the tilt error is then the horizontal bias error over g, fully
+        correlated with it (``phi_n = (C db)_e / g``, ``phi_e = -(C db)_n / g``). ``P0`` gets
+        that cross-covariance and the tilt variance it implies; ``initial_att_std`` then only
+        carries the other (noise) part of the tilt error.
     gate_recovery : float or None
         When every measurement of one type has been rejected for longer than this [s] (an
         unbroken run of at least 3 rejections, with no gap longer than this between them), the
@@ -130,6 +136,7 @@ class FilterConfig:
     gate_probability: float | None = 0.9999
     gate_probabilities: dict = field(default_factory=dict)
     gate_recovery: float | None = 5.0
+    levelling_correlation: bool = False
     smoother: bool = True
     initial_pos_std: float | tuple = 1.0
     initial_vel_std: float | tuple = 0.1
@@ -275,6 +282,25 @@ def _epoch_schedule(t, measurements, epoch_interval, tol):
     return ep, ev_m, ev_r, ptr
 
 
+def levelling_covariance(P, C, att: slice, accel_bias: slice, g: float) -> np.ndarray:
+    """``P`` with the tilt / horizontal accelerometer-bias correlation of a levelled start.
+
+    Levelling sets ``C`` so that ``C^T (0, 0, g) = f_mean``; with an accelerometer bias error
+    ``db`` (nominal minus true) the misalignment is ``phi x g^l = C db``, i.e. ``phi = J db`` with
+    ``J = [[0, -1, 0], [1, 0, 0], [0, 0, 0]] C / g``. Adds ``J P_b J^T`` to the attitude block
+    and ``J P_b`` as the cross-covariance (errors "nominal minus true", ``C = (I + [phi x])
+    C_true``).
+    """
+    P = P.copy()
+    J = np.array([[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 0.0]]) @ C / g
+    Pb = P[accel_bias, accel_bias]
+    cross = J @ Pb
+    P[att, att] += cross @ J.T
+    P[att, accel_bias] = cross
+    P[accel_bias, att] = cross.T
+    return P
+
+
 def _inflate_for(P, H, R, z, thr):
     """P with its navigation blocks (states 0-8) scaled so that ``z`` has NIS ~ thr / 2."""
     P = P.copy()
@@ -405,6 +431,10 @@ def run_filter(
     pnom = pm.initial_values.copy()
     x = np.zeros(n)
     P = np.diag(pm.p0**2)
+    if config.levelling_correlation:
+        P = levelling_covariance(P, C, layout["att"], layout["accel_bias"],
+                                 earth.normal_gravity(initial.lat, initial.height,
+                                                      config.gravity_model))
     par_decay = pm.decay[9:].copy()
     has_decay = bool(np.any(par_decay > 0))
     I_n = np.eye(n)
