@@ -282,6 +282,26 @@ def _epoch_schedule(t, measurements, epoch_interval, tol):
     return ep, ev_m, ev_r, ptr
 
 
+def innovation_tables(log: list, recoveries: list) -> tuple[pd.DataFrame, pd.DataFrame]:
+    """Innovation log and rejected rows from the per-measurement records
+    ``(time, type, dof, nis, threshold, accepted, innovation, S)`` (shared with the RISS
+    filter, so both produce the same columns)."""
+    ncomp = max((r[2] for r in log), default=0)
+    cols = {"time": [r[0] for r in log], "type": [r[1] for r in log],
+            "dof": [r[2] for r in log], "nis": [r[3] for r in log],
+            "threshold": [r[4] for r in log], "accepted": [bool(r[5]) for r in log]}
+    rec = set(recoveries)
+    cols["recovered"] = [(r[0], r[1]) in rec for r in log]
+    for k in range(ncomp):
+        cols[f"innov_{k}"] = [r[6][k] if r[2] > k else np.nan for r in log]
+    for k in range(ncomp):
+        cols[f"innov_std_{k}"] = [np.sqrt(r[7][k, k]) if r[2] > k and r[7][k, k] >= 0 else np.nan
+                                   for r in log]
+    innovations = pd.DataFrame(cols)
+    rejected = innovations[~innovations["accepted"]].reset_index(drop=True)
+    return innovations, rejected
+
+
 def levelling_covariance(P, C, att: slice, accel_bias: slice, g: float) -> np.ndarray:
     """``P`` with the tilt / horizontal accelerometer-bias correlation of a levelled start.
 
@@ -622,20 +642,7 @@ def run_filter(
         smoothed = assemble_table(t, st, ep_t, n_rows, layout, (xs_plus, xs_minus, Ps))
         timing["smoother"] = perf() - c0
 
-    ncomp = max((r[2] for r in log), default=0)
-    cols = {"time": [r[0] for r in log], "type": [r[1] for r in log],
-            "dof": [r[2] for r in log], "nis": [r[3] for r in log],
-            "threshold": [r[4] for r in log], "accepted": [bool(r[5]) for r in log]}
-    rec = set(recoveries)
-    cols["recovered"] = [(r[0], r[1]) in rec for r in log]
-    for k in range(ncomp):
-        cols[f"innov_{k}"] = [r[6][k] if r[2] > k else np.nan for r in log]
-    for k in range(ncomp):
-        cols[f"innov_std_{k}"] = [np.sqrt(r[7][k, k]) if r[2] > k and r[7][k, k] >= 0 else np.nan
-                                   for r in log]
-    innovations = pd.DataFrame(cols)
-    rejected = innovations[~innovations["accepted"]].reset_index(drop=True) if len(log) else \
-        innovations.copy()
+    innovations, rejected = innovation_tables(log, recoveries)
     timing["total"] = perf() - t_start_total
     final = NavState(pos[0], pos[1], pos[2], vel.copy(), C.copy(), float(ep_t[max(completed, 0)]))
     return FilterResult(

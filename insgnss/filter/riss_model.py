@@ -113,7 +113,7 @@ from ..mechanization.riss import (
 )
 from ..mechanization.strapdown import NAV_COLS, NavState
 from . import kernels
-from .engine import FilterConfig, FilterResult
+from .engine import FilterConfig, FilterResult, innovation_tables
 from .measurements import NominalState, Zaru
 from .models import NamedBlocks, StateLayout
 from .smoother import STD_COLS, rts_error_state
@@ -942,7 +942,7 @@ def run_riss_filter(
         smoothed = _assemble(t[:rows], out_st, out_aux, seg, is_ep, ep_t, Ps, Ps, xs_plus,
                              xs_minus, par_ep, proc)
         timing["smoother"] = perf() - c0
-    innovations, rejected = _innovation_tables(log, recoveries)
+    innovations, rejected = innovation_tables(log, recoveries)
     timing["total"] = perf() - t_start
     s_end = out_st[rows - 1]
     riss_dcm_col(s_end[ST_A], s_end[ST_P], s_end[ST_R], cols)
@@ -955,22 +955,7 @@ def run_riss_filter(
         error=error, final=final, params=par_ep[:n_ok])
 
 
-def _innovation_tables(log, recoveries):
-    """Innovation and rejection tables with the columns of the strapdown engine."""
-    ncomp = max((r[2] for r in log), default=0)
-    cols = {"time": [r[0] for r in log], "type": [r[1] for r in log],
-            "dof": [r[2] for r in log], "nis": [r[3] for r in log],
-            "threshold": [r[4] for r in log], "accepted": [bool(r[5]) for r in log]}
-    rec = set(recoveries)
-    cols["recovered"] = [(r[0], r[1]) in rec for r in log]
-    for k in range(ncomp):
-        cols[f"innov_{k}"] = [r[6][k] if r[2] > k else np.nan for r in log]
-    for k in range(ncomp):
-        cols[f"innov_std_{k}"] = [np.sqrt(r[7][k, k]) if r[2] > k and r[7][k, k] >= 0 else np.nan
-                                   for r in log]
-    innovations = pd.DataFrame(cols)
-    rejected = innovations[~innovations["accepted"]].reset_index(drop=True)
-    return innovations, rejected
+
 
 
 def _assemble(t, out_st, out_aux, seg, is_ep, ep_t, P_start, P_end, X_start, X_end, par_ep,
