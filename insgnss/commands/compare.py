@@ -25,7 +25,8 @@ import tomllib
 from pathlib import Path
 
 NAME = "compare"
-HELP = "drift comparison: free inertial vs ZUPT vs ZUPT+ZARU vs ZUPT+CUPT (vs GNSS)"
+HELP = ("drift comparison: free inertial, ZUPT, ZUPT+ZARU, ZUPT+CUPT, GNSS, the job's own "
+        "aided solutions and RISS")
 
 #: default vehicle stop detector: specific-force spread over 0.5 s (engine-off or idling car)
 VEHICLE_DETECTOR = {"method": "amv", "window": 0.5, "threshold": 0.05, "min_stance": 1.0,
