@@ -191,6 +191,27 @@ def ecef_to_enu_matrix(lat: float, lon: float) -> np.ndarray:
     return _ecef_to_enu_matrix(float(lat), float(lon))
 
 
+def ecef_to_enu_vectors(d, lat, lon) -> np.ndarray:
+    """Rotate ECEF vectors (N, 3) into the ENU axes at (lat, lon) [rad] (``C_e^l d``, one point
+    per row; vectorised :func:`ecef_to_enu_matrix`)."""
+    d = np.asarray(d, float)
+    sl, cl, so, co = np.sin(lat), np.cos(lat), np.sin(lon), np.cos(lon)
+    x, y, z = d[:, 0], d[:, 1], d[:, 2]
+    return np.column_stack([-so * x + co * y,
+                            -sl * co * x - sl * so * y + cl * z,
+                            cl * co * x + cl * so * y + sl * z])
+
+
+def enu_to_ecef_vectors(d, lat, lon) -> np.ndarray:
+    """Rotate ENU vectors (N, 3) at (lat, lon) [rad] into ECEF axes (``C_l^e d``)."""
+    d = np.asarray(d, float)
+    sl, cl, so, co = np.sin(lat), np.cos(lat), np.sin(lon), np.cos(lon)
+    e, n, u = d[:, 0], d[:, 1], d[:, 2]
+    return np.column_stack([-so * e - sl * co * n + cl * co * u,
+                            co * e - sl * so * n + cl * so * u,
+                            cl * n + sl * u])
+
+
 def geodetic_to_enu(lat, lon, h, lat0: float, lon0: float, h0: float):
     """Geodetic coordinates to local ENU coordinates [m] about the origin (lat0, lon0, h0).
 

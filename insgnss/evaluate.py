@@ -15,7 +15,7 @@ import numpy as np
 import pandas as pd
 
 from .attitude import euler_to_dcm
-from .earth import ecef_to_enu_matrix, enu_displacement_to_geodetic, geodetic_to_ecef
+from .earth import ecef_to_enu_vectors, enu_displacement_to_geodetic, geodetic_to_ecef
 from .outages import in_windows, window_index
 
 
@@ -61,9 +61,7 @@ def position_errors(solution: pd.DataFrame, reference: pd.DataFrame, *,
     ok |= exact
     d = xi - xr
     lat, lon = reference["lat"].to_numpy(), reference["lon"].to_numpy()
-    enu = np.empty_like(d)
-    for k in range(len(d)):  # per reference epoch (a few thousand), not per IMU sample
-        enu[k] = ecef_to_enu_matrix(lat[k], lon[k]) @ d[k]
+    enu = ecef_to_enu_vectors(d, lat, lon)
     enu[~ok] = np.nan
     out = pd.DataFrame(enu, index=reference.index, columns=["east", "north", "up"])
     out["horizontal"] = np.hypot(out["east"], out["north"])

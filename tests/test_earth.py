@@ -71,3 +71,14 @@ def test_rates():
 
 def test_schuler_period():
     assert earth.schuler_period(np.radians(45)) / 60 == pytest.approx(84.4, abs=0.2)
+
+
+def test_vector_rotations_match_the_matrix():
+    rng = np.random.default_rng(3)
+    lat = rng.uniform(-1.5, 1.5, 20)
+    lon = rng.uniform(-3, 3, 20)
+    d = rng.normal(size=(20, 3))
+    enu = earth.ecef_to_enu_vectors(d, lat, lon)
+    for k in range(20):
+        assert np.allclose(enu[k], earth.ecef_to_enu_matrix(lat[k], lon[k]) @ d[k])
+    assert np.allclose(earth.enu_to_ecef_vectors(enu, lat, lon), d)

@@ -61,7 +61,13 @@ import numpy as np
 import pandas as pd
 
 from ..attitude import dcm_to_rotvec, euler_to_dcm
-from ..earth import ecef_to_geodetic, enu_displacement_to_geodetic, geodetic_to_ecef
+from ..earth import (
+    ecef_to_enu_vectors,
+    ecef_to_geodetic,
+    enu_displacement_to_geodetic,
+    enu_to_ecef_vectors,
+    geodetic_to_ecef,
+)
 from ..outages import periodic_windows as _periodic
 from .sensors import gauss_markov
 
@@ -136,22 +142,8 @@ def antenna_position(truth: pd.DataFrame, idx: np.ndarray, lever_arm) -> np.ndar
     return np.column_stack([la, lo, hh])
 
 
-def _enu_to_ecef(d: np.ndarray, lat: np.ndarray, lon: np.ndarray) -> np.ndarray:
-    """Rotate ENU vectors (N, 3) at (lat, lon) into ECEF axes (``C_l^e d``), vectorised."""
-    sl, cl, so, co = np.sin(lat), np.cos(lat), np.sin(lon), np.cos(lon)
-    e, nn, u = d[:, 0], d[:, 1], d[:, 2]
-    return np.column_stack([-so * e - sl * co * nn + cl * co * u,
-                            co * e - sl * so * nn + cl * so * u,
-                            cl * nn + sl * u])
-
-
-def _ecef_to_enu(d: np.ndarray, lat: np.ndarray, lon: np.ndarray) -> np.ndarray:
-    """Rotate ECEF vectors (N, 3) into the ENU axes at (lat, lon) (``C_e^l d``), vectorised."""
-    sl, cl, so, co = np.sin(lat), np.cos(lat), np.sin(lon), np.cos(lon)
-    x, y, z = d[:, 0], d[:, 1], d[:, 2]
-    return np.column_stack([-so * x + co * y,
-                            -sl * co * x - sl * so * y + cl * z,
-                            cl * co * x + cl * so * y + sl * z])
+_enu_to_ecef = enu_to_ecef_vectors
+_ecef_to_enu = ecef_to_enu_vectors
 
 
 def antenna_velocity(truth: pd.DataFrame, idx: np.ndarray, lever_arm) -> np.ndarray:
