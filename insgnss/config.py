@@ -141,7 +141,9 @@ SCHEMA: dict[str, Any] = {
         "static_intervals": _spec(list, None, "declared still intervals [[t0, t1], ...]"),
         "nhc": _spec(bool, False, "non-holonomic constraint (land vehicles)"),
         "nhc_std": _spec(list, [0.1, 0.1], "lateral, vertical body velocity sigma [m/s]"),
-        "nhc_interval": _spec(_NUM, 0.1),
+        "nhc_interval": _spec(_NUM, 0.25, "NHC update interval [s]: the constraint's violations "
+                              "(suspension, vibration, slip) are correlated in time, so faster "
+                              "updates over-weight it"),
         "nhc_min_speed": _spec(_NUM, 0.5, "apply NHC above this speed [m/s]"),
         "nhc_misalignment": _spec(bool, False, "estimate IMU-to-vehicle pitch/yaw misalignment"),
         "cupt": _spec(bool, False),
