@@ -188,6 +188,16 @@ SCHEMA: dict[str, Any] = {
         "imu_grade": _spec(str, None, "IMU error model for the filter: navigation, tactical, "
                            "consumer/mems (default: the scenario's [imu] for simulated jobs, "
                            "else tactical)"),
+        "riss": {
+            "odometer_scale_std": _spec(_NUM, 0.02, "RISS: initial odometer scale-factor sigma"),
+            "odometer_scale_psd": _spec(_NUM, 0.0, "RISS: its random-walk PSD [1/s]"),
+            "slip_std": _spec(_NUM, 0.02, "RISS: wheel slip / speed model sigma [m/s]"),
+            "split_turn_on": _spec(bool, True, "RISS: separate random-constant turn-on biases"),
+            "azimuth": _spec(str, "exact", "RISS azimuth equation (docs/riss.md)",
+                             choices=["exact", "level", "projected"]),
+            "coriolis": _spec(bool, True, "RISS: Earth-rate / Coriolis terms"),
+            "window": _spec(_NUM, 1.0, "RISS: pitch/roll smoothing window [s]"),
+        },
         "imu_model": {
             "gyro_bias_deg_h": _spec(_NUM, None, "overrides of the grade, datasheet units"),
             "accel_bias_mg": _spec(_NUM, None),

@@ -723,7 +723,7 @@ def _run_riss(job: Job, inputs: Inputs, windows, model: ImuErrorModel, t_start: 
     # aiding.odometer_std is the odometer speed noise; filter.scale_factors estimates the
     # vertical gyro scale factor
     rcfg = RissConfig(odometer_speed_std=float(job["aiding"]["odometer_std"]),
-                      gyro_scale=bool(job["filter"]["scale_factors"]))
+                      gyro_scale=bool(job["filter"]["scale_factors"]), **job["filter"]["riss"])
     res = run_riss_filter(imu, odo, init.state, meas, cfg, rcfg)
     return _job_result(job, inputs, init, windows, res, meas, model, len(imu), t_start, {}, {})
 

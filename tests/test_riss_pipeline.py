@@ -55,3 +55,25 @@ def test_riss_job_runs_end_to_end(tmp_path):
 def test_riss_job_refuses_odometer_aiding():
     with pytest.raises(ConfigError, match="odometer"):
         run_job(_job(aiding={"odometer": True}))
+
+
+def test_riss_settings_from_the_job_reach_the_filter(monkeypatch):
+    """[filter.riss] keys are passed to RissConfig (and wrong ones are named)."""
+    from insgnss.filter import riss_model
+
+    seen = {}
+    real = riss_model.run_riss_filter
+
+    def spy(imu, odo, state, meas, cfg, rcfg):
+        seen["rcfg"] = rcfg
+        return real(imu, odo, state, meas, cfg, rcfg)
+
+    monkeypatch.setattr(riss_model, "run_riss_filter", spy)
+    job = _job()
+    job.settings["filter"]["riss"].update(azimuth="level", window=0.5, slip_std=0.05)
+    run_job(job)
+    assert seen["rcfg"].azimuth == "level" and seen["rcfg"].window == 0.5
+    assert seen["rcfg"].slip_std == 0.05
+    with pytest.raises(ConfigError) as exc:
+        load_job_dict({"filter": {"riss": {"azimuthh": "level"}}})
+    assert exc.value.column == "filter.riss.azimuthh"
