@@ -12,6 +12,7 @@ from insgnss.mechanization.inverse import integrate_position
 from insgnss.mechanization.strapdown import NavState
 
 LAT45 = np.radians(45.0)
+LON7 = np.radians(7.0)
 
 
 def static_increments(duration, rate, lat=LAT45, h=0.0, roll=0.0, pitch=0.0, heading=0.0,
@@ -31,7 +32,7 @@ def static_increments(duration, rate, lat=LAT45, h=0.0, roll=0.0, pitch=0.0, hea
                                                               heading)
 
 
-def dynamic_trajectory(duration=600.0, rate=100.0, lat0=LAT45, lon0=np.radians(7.0), h0=100.0):
+def dynamic_trajectory(duration=600.0, rate=100.0, lat0=LAT45, lon0=LON7, h0=100.0):
     """A 10-minute trajectory with speed changes, turns, climbs and banked roll."""
     t = np.arange(int(round(duration * rate)) + 1) / rate
     speed = 10 + 5 * np.sin(2 * np.pi * t / 120)

@@ -12,7 +12,10 @@ from insgnss.cli import main
 from insgnss.io.native import read_table
 
 
-def _write_frd_csv(path, duration=150.0, rate=100.0, heading=np.radians(40.0)):
+HEADING40 = np.radians(40.0)
+
+
+def _write_frd_csv(path, duration=150.0, rate=100.0, heading=HEADING40):
     imu, _ = static_increments(duration, rate, LAT45, h=200.0, roll=0.01, pitch=0.02,
                                heading=heading)
     w = rfu_to_frd(imu[["dtheta_x", "dtheta_y", "dtheta_z"]].to_numpy()[1:] * rate)
