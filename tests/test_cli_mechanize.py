@@ -11,7 +11,6 @@ from insgnss.attitude import rfu_to_frd
 from insgnss.cli import main
 from insgnss.io.native import read_table
 
-
 HEADING40 = np.radians(40.0)
 
 
