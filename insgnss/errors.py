@@ -6,19 +6,8 @@ what was found. The CLI prints these without a traceback and exits with status 2
 from __future__ import annotations
 
 
-class InsgnssError(Exception):
-    """Base class of all insgnss errors meant for the user.
-
-    Parameters
-    ----------
-    message : str
-        What is wrong.
-    file, row, column : optional
-        Location: file path, 1-based row number (as an editor shows it, header included),
-        column name or job-file key.
-    expected, found : optional
-        What was expected and what was found.
-    """
+class _Located:
+    """Location fields (file, row, column) and expected/found, formatted into the message."""
 
     def __init__(self, message: str, *, file=None, row: int | None = None, column=None,
                  expected=None, found=None):
@@ -44,6 +33,21 @@ class InsgnssError(Exception):
         if self.found is not None:
             text += f", found {self.found}"
         return text
+
+
+class InsgnssError(_Located, Exception):
+    """Base class of all insgnss errors meant for the user.
+
+    Parameters
+    ----------
+    message : str
+        What is wrong.
+    file, row, column : optional
+        Location: file path, 1-based row number (as an editor shows it, header included),
+        column name or job-file key.
+    expected, found : optional
+        What was expected and what was found.
+    """
 
 
 class InputFormatError(InsgnssError):
@@ -82,22 +86,10 @@ class RateMismatchError(InsgnssError):
     """The measured sample rate does not match the declared rate."""
 
 
-class InsgnssWarning(UserWarning):
+class InsgnssWarning(_Located, UserWarning):
     """A problem insgnss repaired or tolerated (bridged gap, dropped duplicate, trimmed epoch).
 
     Emitted with :func:`warnings.warn`; carries the same location fields as
     :class:`InsgnssError`. The reader that warns also records what it did in the table's
     ``attrs`` (e.g. ``attrs["gaps"]``, ``attrs["dropped_duplicates"]``).
     """
-
-    def __init__(self, message: str, *, file=None, row: int | None = None, column=None,
-                 expected=None, found=None):
-        self.message = message
-        self.file = None if file is None else str(file)
-        self.row = row
-        self.column = column
-        self.expected = expected
-        self.found = found
-        super().__init__(self._format())
-
-    _format = InsgnssError._format
