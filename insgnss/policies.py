@@ -1,4 +1,4 @@
-"""Job-level input policies (issue 8): IMU gaps and duplicated samples, and split runs.
+"""Job-level input policies (issue 8): IMU gaps and duplicated samples.
 
 The readers validate what they read (:mod:`insgnss.validate`, docs/formats.md); the pipeline
 applies the same policies once more to the IMU table it is about to process, so that tables
@@ -14,29 +14,18 @@ treatment and every run reports what was repaired (``summary.json`` ``"imu"``):
   Longer gaps follow ``inputs.imu.gap_policy``: ``"error"`` (default) stops with a
   :class:`~insgnss.errors.DataGapError` naming the file and row after the gap, ``"bridge"``
   bridges them too, ``"split"`` processes the contiguous segments as separate runs
-  (:func:`run_segments`);
-- **split runs**: the first segment uses the job's initialization; each later one starts at
-  its first sample with the job's method and falls back to ``gnss_velocity`` (GNSS position,
-  velocity and course over ground) when that fails (a static alignment while the vehicle
-  moves). A segment that cannot be initialized is skipped with a warning and recorded. The
-  outputs hold the segments one after the other, with a ``segment`` column; the filter state
-  and the smoother never cross a long gap.
+  (:mod:`insgnss.job.segments`).
 """
 
 from __future__ import annotations
 
-import copy
 import warnings
 
 import numpy as np
 import pandas as pd
 
 from .config import Job
-from .errors import InsgnssError
-from .validate import GapPolicy, apply_gap_policy, check_time_order, find_gaps, warn
-
-#: fewest IMU samples a split segment needs to be processed
-MIN_SEGMENT_SAMPLES = 100
+from .validate import GapPolicy, apply_gap_policy, check_time_order, find_gaps
 
 
 def gap_policy(job: Job) -> GapPolicy:
@@ -190,142 +179,4 @@ def shift_report(report: dict, dt: float) -> dict:
     return out
 
 
-def _segment_job(job: Job, windows, start: float | None, method: str | None) -> Job:
-    s = copy.deepcopy(job.settings)
-    if start is not None:
-        s["initialization"]["start_time"] = float(start)
-    if method is not None:
-        s["initialization"]["method"] = method
-    s["inputs"]["imu"]["estimate_time_offset"] = False  # applied once to the whole table
-    s["inputs"]["imu"]["gap_policy"] = "bridge"  # the segment has no long gap left
-    s["outages"] = {"windows": [[float(a), float(b)] for a, b in windows],
-                    "relative_to": "absolute",
-                    "periodic": {"start": None, "length": None, "gap": None,
-                                 "stop_before_end": 0.0}}
-    return Job(settings=s, path=job.path, simulation=job.simulation)
-
-
-def run_segments(job: Job, inputs, windows, segments, *, progress=None, preprocessing=None):
-    """Run the job on each contiguous IMU segment and merge the results (module docstring).
-
-    Returns a :class:`insgnss.pipeline.JobResult` whose ``filter`` holds the segments one after
-    the other (``segment`` column in the trajectories and logs) and whose summary lists the
-    segments (``"segments"``: start, end, initialization, complete, error or skip reason).
-    """
-    from dataclasses import replace
-
-    from .pipeline import JobResult, evaluate_solution, run_job
-
-    imu = inputs.imu
-    t = np.asarray(imu.index, float)
-    results, info = [], []
-    for k, (a, b) in enumerate(segments):
-        i0, i1 = np.searchsorted(t, a, "left"), np.searchsorted(t, b, "right")
-        rec = {"segment": k, "start": float(a), "end": float(b), "samples": int(i1 - i0)}
-        info.append(rec)
-        if i1 - i0 < MIN_SEGMENT_SAMPLES:
-            rec["skipped"] = f"fewer than {MIN_SEGMENT_SAMPLES} IMU samples"
-            warn(f"IMU segment {k} ({a!r} to {b!r} s) skipped: {rec['skipped']}",
-                 file=imu.attrs.get("source"))
-            continue
-        seg_imu = imu.iloc[i0:i1]
-        gnss = inputs.gnss
-        if gnss is not None:
-            gt = np.asarray(gnss.index, float)
-            gnss = gnss.iloc[np.searchsorted(gt, a, "left"):np.searchsorted(gt, b, "right")]
-        seg_inputs = replace(inputs, imu=seg_imu, gnss=gnss)
-        start = None if k == 0 else float(a)
-        methods = [None]
-        if k > 0 and job["initialization"]["method"] != "gnss_velocity" and gnss is not None \
-                and "vel_e" in gnss.columns and len(gnss):
-            # moving at the segment start (GNSS speed): start from GNSS position, velocity and
-            # course; standing: the job's own method (e.g. a static alignment) first
-            moving = float(np.hypot(gnss["vel_e"].iloc[0], gnss["vel_n"].iloc[0])) > \
-                job["initialization"]["min_speed"]
-            methods = ["gnss_velocity", None] if moving else [None, "gnss_velocity"]
-        res, errors = None, []
-        for m in methods:
-            try:
-                res = run_job(_segment_job(job, windows, start, m), progress=progress,
-                              inputs=replace(seg_inputs))
-                break
-            except InsgnssError as exc:
-                if k == 0:
-                    raise
-                errors.append(f"{m or job['initialization']['method']}: {exc}")
-        if res is None:
-            rec["skipped"] = "; ".join(errors)
-            warn(f"IMU segment {k} ({a!r} to {b!r} s) skipped: cannot initialize: "
-                 f"{rec['skipped']}", file=imu.attrs.get("source"))
-            continue
-        rec.update(initialization=res.summary["initialization"]["method"],
-                   complete=res.summary["complete"], error=res.summary["error"],
-                   evaluation={n: {key: e.get(key) for key in ("rms_h_m", "max_h_m", "n_covered")}
-                               for n, e in res.summary["evaluation"].items()})
-        results.append((k, res))
-    if not results:
-        raise InsgnssError("no IMU segment could be processed", file=imu.attrs.get("source"))
-    first = results[0][1]
-    merged = _merge_filter([(k, r.filter) for k, r in results])
-    out = JobResult(job, inputs, first.init, list(windows), merged)
-    for name in ("forward", "smoothed"):
-        ev = evaluate_solution(getattr(merged, name), inputs, windows, job)
-        if ev:
-            out.evaluation[name] = ev
-    summary = dict(first.summary)
-    summary.update(
-        complete=bool(merged.complete), error=None if merged.error is None else str(merged.error),
-        imu_samples=int(sum(r.summary["imu_samples"] for _, r in results)),
-        measurements={n: int(sum(r.summary["measurements"].get(n, 0) for _, r in results))
-                      for n in {n for _, r in results for n in r.summary["measurements"]}},
-        rejected=merged.rejected.groupby("type").size().astype(int).to_dict()
-        if len(merged.rejected) else {},
-        outages=[list(w) for w in windows], segments=info,
-        preprocessing=dict(preprocessing or {}),
-        evaluation={k: v["summary"] for k, v in out.evaluation.items()})
-    summary["timing_s"] = {key: float(sum(r.summary["timing_s"].get(key, 0.0)
-                                          for _, r in results))
-                           for key in first.summary["timing_s"]}
-    out.summary = summary
-    return out
-
-
-def _merge_filter(parts):
-    """One FilterResult holding several segments' results in time order."""
-    from dataclasses import replace
-
-    def cat(name, seg_col=True):
-        frames = []
-        for k, f in parts:
-            df = getattr(f, name)
-            if df is None:
-                return None
-            if seg_col:
-                df = df.copy()
-                df["segment"] = k
-            frames.append(df)
-        out = pd.concat(frames)
-        return out.reset_index(drop=True) if name in ("innovations", "rejected") else out
-
-    fs = [f for _, f in parts]
-    err = next((f.error for f in fs if f.error is not None), None)
-    same = all(f.P_filtered.shape[1:] == fs[0].P_filtered.shape[1:] for f in fs)
-
-    def stack(name):
-        arrs = [getattr(f, name) for f in fs]
-        if not same or any(a is None for a in arrs):
-            return None
-        return np.concatenate(arrs)
-
-    timing = {k: float(sum(f.timing.get(k, 0.0) for f in fs)) for k in fs[0].timing}
-    return replace(fs[0], forward=cat("forward"), smoothed=cat("smoothed"),
-                   innovations=cat("innovations"), rejected=cat("rejected"),
-                   complete=all(f.complete for f in fs), error=err, timing=timing,
-                   epoch_times=np.concatenate([f.epoch_times for f in fs]),
-                   P_filtered=stack("P_filtered"), P_predicted=stack("P_predicted"),
-                   feedback=stack("feedback"), P_smoothed=stack("P_smoothed"),
-                   params=stack("params"), final=fs[-1].final)
-
-
-__all__ = ["MIN_SEGMENT_SAMPLES", "check_imu_table", "gap_noise", "gap_policy", "run_segments",
-           "shift_report"]
+__all__ = ["check_imu_table", "gap_noise", "gap_policy", "shift_report"]

@@ -1,0 +1,186 @@
+"""Inputs of a job: read the files a job names (or simulate its scenario) into tables in insgnss
+conventions (docs/conventions.md), and build the filter's IMU error model.
+
+Readers live in :mod:`insgnss.io`; this module only picks the reader and its arguments from
+the job (``[inputs.*]``) and returns plain data (:class:`Inputs`). No navigation math.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+import pandas as pd
+
+from ..config import Job
+from ..errors import ConfigError
+from ..imu import ImuErrorModel, grade
+from ..policies import gap_policy
+
+
+@dataclass
+class Inputs:
+    """Data of a job, in insgnss conventions."""
+
+    imu: pd.DataFrame
+    gnss: pd.DataFrame | None = None
+    odometer: pd.DataFrame | None = None
+    reference: pd.DataFrame | None = None
+    reference_point: str = "antenna"
+    control_points: pd.DataFrame | None = None
+    lever_arm: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    imu_model: ImuErrorModel | None = None
+    truth: pd.DataFrame | None = None
+    source: str = "files"
+    seed: int | None = None
+
+
+#: ``[filter.imu_model]`` key -> :class:`~insgnss.imu.ImuErrorModel` field
+_MODEL_FIELDS = {"gyro_bias_deg_h": "gyro_bias", "accel_bias_mg": "accel_bias",
+                 "gyro_bias_instability_deg_h": "gyro_bias_instability",
+                 "accel_bias_instability_ug": "accel_bias_instability",
+                 "bias_correlation_time_s": "bias_correlation_time",
+                 "gyro_arw_deg_sqrt_h": "gyro_arw", "accel_vrw_m_s_sqrt_h": "accel_vrw",
+                 "gyro_scale_ppm": "gyro_scale", "accel_scale_ppm": "accel_scale"}
+
+
+def imu_model(job: Job, default: ImuErrorModel | None) -> ImuErrorModel:
+    """The filter's IMU error model: ``[filter] imu_grade`` (else ``default``, else tactical)
+    with the ``[filter.imu_model]`` datasheet overrides."""
+    f = job["filter"]
+    if f["imu_grade"] is not None:
+        base = grade(f["imu_grade"])
+    elif default is not None:
+        base = default
+    else:
+        base = grade("tactical")
+    over = {k: v for k, v in f["imu_model"].items() if v is not None}
+    if not over:
+        return base
+    ds = ImuErrorModel.from_datasheet(**over)
+    changes = {_MODEL_FIELDS[k]: getattr(ds, _MODEL_FIELDS[k]) for k in over}
+    return base.scaled(**changes, name=f"{base.name}+overrides")
+
+
+def read_imu(job: Job) -> pd.DataFrame:
+    """The IMU table of ``[inputs.imu]`` (body frame, SI, time in the job's time base)."""
+    spec = job["inputs"]["imu"]
+    path = job.resolve(spec["path"])
+    if path is None:
+        raise ConfigError("no IMU file given", file=job.path, column="inputs.imu.path")
+    fmt = spec["format"]
+    if fmt == "rtklibexplorer":
+        from ..io.rtklibexplorer import read_rtklibexplorer_imu
+
+        if spec["mounting_deg"] is None:
+            raise ConfigError("the rtklibexplorer format needs the declared mounting",
+                              file=job.path, column="inputs.imu.mounting_deg")
+        return read_rtklibexplorer_imu(path, mounting_rpy_deg=spec["mounting_deg"],
+                                       tag_path=job.resolve(spec["tag"]),
+                                       time_offset=spec["time_offset"], rate_hz=spec["rate_hz"],
+                                       gap_policy=gap_policy(job),
+                                       duplicates=spec["duplicates"])
+    if fmt == "kfgins":
+        from ..io.kfgins import read_kfgins_imu
+
+        return read_kfgins_imu(path, gap_policy=gap_policy(job), duplicates=spec["duplicates"])
+    if fmt == "native":
+        from ..io.tracks import read_trajectory_csv
+
+        return read_trajectory_csv(path, required=(), duplicates=spec["duplicates"])
+    from ..io.imu_csv import read_imu_csv
+
+    return read_imu_csv(path, columns=spec["columns"], gyro_unit=spec["gyro_unit"],
+                        accel_unit=spec["accel_unit"], time_unit=spec["time_unit"],
+                        time_offset=spec["time_offset"], axis_map=spec["axis_map"],
+                        mounting_euler_deg=spec["mounting_deg"], sensor_axes=spec["sensor_axes"],
+                        euler_convention=spec["mounting_convention"], rate_hz=spec["rate_hz"],
+                        delimiter=spec["delimiter"], header=spec["header"],
+                        gap_policy=gap_policy(job), duplicates=spec["duplicates"])
+
+
+def read_gnss(job: Job) -> pd.DataFrame | None:
+    """The GNSS table of ``[inputs.gnss]`` (None without a file)."""
+    spec = job["inputs"]["gnss"]
+    path = job.resolve(spec["path"])
+    if path is None:
+        return None
+    fmt = spec["format"]
+    if fmt == "rtklib_pos":
+        from ..io.rtklib import read_rtklib_pos
+
+        g = read_rtklib_pos(path, duplicates=spec["duplicates"])
+    elif fmt == "nmea":
+        from ..io.nmea import read_nmea
+
+        g = read_nmea(path, date=spec["date"], duplicates=spec["duplicates"])
+    elif fmt == "kfgins":
+        from ..io.kfgins import read_kfgins_gnss
+
+        g = read_kfgins_gnss(path, duplicates=spec["duplicates"])
+    else:
+        from ..io.tracks import read_trajectory_csv
+
+        g = read_trajectory_csv(path, duplicates=spec["duplicates"])
+    if spec["time_offset"]:
+        g = g.set_axis(g.index + spec["time_offset"], axis=0)
+    return g
+
+
+def read_reference(job: Job) -> pd.DataFrame | None:
+    """The reference trajectory of ``[inputs.reference]`` (None without a file)."""
+    spec = job["inputs"]["reference"]
+    path = job.resolve(spec["path"])
+    if path is None:
+        return None
+    if spec["format"] == "rtklib_pos":
+        from ..io.rtklib import read_rtklib_pos
+
+        ref = read_rtklib_pos(path)
+        if spec["q"] is not None:
+            ref = ref[ref["q"].isin([float(q) for q in spec["q"]])]
+    else:
+        from ..io.reference import read_reference as read
+
+        ref = read(path, "kfgins-nav" if spec["format"] == "kfgins_nav" else "native")
+    return ref
+
+
+def load_inputs(job: Job, seed: int | None = None) -> Inputs:
+    """Read (or simulate, for a job that carries a scenario) all inputs of a job."""
+    la = np.asarray(job["inputs"]["gnss"]["lever_arm"], float)
+    if la.shape != (3,):
+        raise ConfigError("lever arm must have 3 elements", file=job.path,
+                          column="inputs.gnss.lever_arm", found=list(la))
+    if job.simulation and job["inputs"]["imu"]["path"] is None:
+        from ..simulate.scenario import simulate_scenario
+
+        sim = simulate_scenario(dict(job.simulation), seed=seed)
+        sim_la = np.asarray(job.simulation.get("gnss", {}).get("lever_arm", la), float)
+        truth = sim.truth
+        step = max(1, int(round(0.1 / np.median(np.diff(truth.index.to_numpy()[:100])))))
+        sim_grade = job.simulation.get("imu", {}).get("grade")
+        return Inputs(imu=sim.imu, gnss=sim.gnss, odometer=sim.odometer,
+                      reference=truth.iloc[::step], reference_point="imu",
+                      lever_arm=sim_la, truth=truth, source="simulation", seed=sim.seed,
+                      imu_model=imu_model(job, grade(sim_grade) if sim_grade else None))
+    imu = read_imu(job)
+    gnss = read_gnss(job)
+    odo = None
+    if job["inputs"]["odometer"]["path"] is not None:
+        from ..io.odometer import read_odometer
+
+        odo = read_odometer(job.resolve(job["inputs"]["odometer"]["path"]),
+                            kind=job["inputs"]["odometer"]["kind"])
+    cp = None
+    if job["inputs"]["control_points"]["path"] is not None:
+        from ..io.native import read_table
+
+        cp = read_table(job.resolve(job["inputs"]["control_points"]["path"]),
+                        required=["lat", "lon", "height"])
+    return Inputs(imu=imu, gnss=gnss, odometer=odo, reference=read_reference(job),
+                  reference_point=job["inputs"]["reference"]["point"], control_points=cp,
+                  lever_arm=la, imu_model=imu_model(job, None))
+
+
+__all__ = ["Inputs", "imu_model", "load_inputs", "read_gnss", "read_imu", "read_reference"]

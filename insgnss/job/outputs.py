@@ -1,0 +1,91 @@
+"""Outputs of a run (``[outputs]``, docs/jobs.md): forward and smoothed trajectories in the
+requested formats, innovation and rejection logs, outage tables, ``summary.json`` and the HTML
+report, written as one file set (:class:`insgnss.io.outputset.OutputSet`)."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+from ..evaluate import move_point
+from ..io.native import atomic_write, atomic_write_text, jsonable, write_table
+from ..io.outputset import MARKER, OutputSet
+from .result import JobResult
+
+#: every file name write_outputs may produce (a previous run's files that a new run does not
+#: produce are removed when the new set is committed, so a folder never mixes two runs)
+OUTPUT_NAMES = tuple(
+    [f"{t}{ext}" for t in ("forward", "smoothed")
+     for ext in (".csv", ".nav", ".kml", ".geojson", "_eval.csv")]
+    + ["innovations.csv", "rejected.csv", "outages_forward.csv", "outages_smoothed.csv",
+       "summary.json", "report.html"])
+
+
+def write_outputs(result: JobResult, out_dir: str | Path | None = None) -> dict[str, Path]:
+    """Write trajectories, logs, summary and report of a run; returns the paths by name.
+
+    The files form one set (:class:`insgnss.io.outputset.OutputSet`): they are written into a
+    hidden staging folder and moved onto their final names together at the end, so an
+    interrupted run leaves the previous outputs complete, or (interrupted during the final
+    renames) a set marked by an ``INCOMPLETE`` file. A run whose filter stopped early writes
+    what it computed and keeps ``INCOMPLETE`` (with the reason; ``summary.json`` has
+    ``"complete": false``, the error and ``"stopped_at"``). No output may overwrite an input.
+    """
+    job = result.job
+    out = Path(out_dir) if out_dir is not None else job.output_dir
+    complete = bool(result.summary.get("complete", result.filter.complete))
+    with OutputSet(out, protect=job.input_paths(), stale=OUTPUT_NAMES + (MARKER,)) as outs:
+        dest = outs.path
+        point = job["outputs"]["point"]
+        tables = {"forward": result.filter.forward, "smoothed": result.filter.smoothed}
+        formats = job["outputs"]["formats"]
+        for name, df in tables.items():
+            if df is None:
+                continue
+            if point == "antenna":
+                df = move_point(df, result.inputs.lever_arm)
+            if "csv" in formats:
+                write_table(df, dest(f"{name}.csv"))
+            if "nav" in formats:
+                from ..io.kfgins import write_kfgins_nav
+
+                write_kfgins_nav(df, dest(f"{name}.nav"))
+            if "kml" in formats:
+                from ..io.tracks import write_kml
+
+                write_kml({name: df}, dest(f"{name}.kml"))
+            if "geojson" in formats:
+                from ..io.tracks import write_geojson
+
+                write_geojson({name: df}, dest(f"{name}.geojson"))
+            if "eval" in formats:
+                from ..io.tracks import write_eval_csv
+
+                write_eval_csv(move_point(tables[name], result.inputs.lever_arm),
+                               dest(f"{name}_eval.csv"))
+        for name in ("innovations", "rejected"):
+            log = getattr(result.filter, name)
+            write_table(log.set_index("time") if "time" in log.columns else log,
+                        dest(f"{name}.csv"))
+        for name, ev in result.evaluation.items():
+            if len(ev["outages"]):
+                table = ev["outages"]
+                atomic_write(dest(f"outages_{name}.csv"),
+                             lambda p, table=table: table.to_csv(p, index=False))
+        summary = dict(result.summary)
+        summary["files"] = sorted(outs.names + ["summary.json"]
+                                  + (["report.html"] if job["outputs"]["report"] else [])
+                                  + ([] if complete else [MARKER]))
+        atomic_write_text(dest("summary.json"), json.dumps(jsonable(summary), indent=2) + "\n")
+        if job["outputs"]["report"]:
+            from ..report import write_report
+
+            write_report(result, dest("report.html"))
+        reason = "" if complete else (
+            f"The filter stopped early at t = {summary.get('stopped_at')} s: "
+            f"{summary.get('error')}\nThe trajectories and logs end there (summary.json has "
+            '"complete": false).')
+        return outs.commit(complete=complete, reason=reason)
+
+
+__all__ = ["OUTPUT_NAMES", "write_outputs"]

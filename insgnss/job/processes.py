@@ -1,0 +1,177 @@
+"""Process models of a job, as a table: each entry turns a prepared run (:class:`.RunContext`)
+into a :class:`.JobResult` with the filter engine and a process model.
+
+=============  ==============================================================================
+process        what runs
+=============  ==============================================================================
+``strapdown``  LLF strapdown error-state filter + RTS smoother
+               (:func:`insgnss.filter.engine.run_filter`) with the job's aiding
+``riss``       the RISS process model (:func:`insgnss.filter.riss_model.run_riss_filter`):
+               the same initialization, aiding, evaluation and summary, the odometer as the
+               process input
+``foot``       the foot-mounted pedestrian INS (:func:`insgnss.foot.run_foot_ins`): ZUPT/ZARU at
+               every stance sample; heading unobservable, so it is given
+=============  ==============================================================================
+
+Which one runs is data, not code: ``[process] preset`` names a process in :data:`PRESETS`
+(``None`` leaves the choice to ``[filter] process_model``). A platform profile
+(``[job] platform``) is a further row of such a table; a new process model is a function
+added to :data:`PROCESSES`.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+
+import numpy as np
+
+from ..config import Job
+from ..errors import ConfigError
+from ..filter.engine import FilterConfig, run_filter
+from ..imu import ImuErrorModel
+from ..policies import gap_noise
+from ..preprocess import with_static_noise
+from .aiding import build_measurements
+from .context import RunContext
+from .evaluation import evaluate_result
+from .initialization import Initialization, initialize
+from .result import JobResult, PresetResult
+from .summary import filter_summary, initialization_summary, job_name
+
+
+def filter_config(job: Job, model: ImuErrorModel, init: Initialization) -> FilterConfig:
+    """The engine's :class:`~insgnss.filter.engine.FilterConfig` from ``[filter]`` and the
+    initialization's sigmas."""
+    f = job["filter"]
+    return FilterConfig(
+        imu_model=model, bias_model=f["bias_model"], scale_factors=f["scale_factors"],
+        propagation_interval=f["propagation_interval"], epoch_interval=f["epoch_interval"],
+        discretization=f["discretization"], gate_probability=f["gate_probability"] or None,
+        smoother=f["smoother"], initial_pos_std=init.pos_std, initial_vel_std=init.vel_std,
+        initial_att_std=init.att_std, coning=f["coning"],
+        levelling_correlation=init.levelled,
+        gate_recovery=f["gate_recovery"] or None, nis_window=f["nis_window"] or None,
+        nis_bound=f["nis_bound"],
+        gyro_bias=None if init.gyro_bias is None else tuple(init.gyro_bias))
+
+
+def _filter_result(ctx: RunContext, init: Initialization, res, meas, model: ImuErrorModel,
+                   n_imu: int) -> JobResult:
+    """Evaluate a finished filter run and build its :class:`JobResult` with the summary."""
+    out = evaluate_result(JobResult(ctx.job, ctx.inputs, init, ctx.windows, res))
+    out.summary = filter_summary(out, meas, model.name, n_imu, ctx.t_start, ctx.timing,
+                                 {"imu": ctx.imu_report, "preprocessing": ctx.preprocessing})
+    return out
+
+
+def run_strapdown(ctx: RunContext) -> JobResult:
+    """LLF strapdown error-state filter (+ smoother) with the job's aiding."""
+    job, inputs, model = ctx.job, ctx.inputs, ctx.model
+    init = initialize(job, inputs, model)
+    if job["filter"]["noise_from_static"] and init.static_end is not None:
+        model = with_static_noise(model, inputs.imu.loc[:init.static_end])
+        ctx.preprocessing["gyro_arw_deg_sqrt_h"] = float(np.degrees(model.gyro_arw) * 60)
+        ctx.preprocessing["accel_vrw_m_s_sqrt_h"] = float(model.accel_vrw * 60)
+    imu = inputs.imu.loc[init.state.time:]
+    meas = build_measurements(job, inputs, ctx.windows, imu)
+    cfg = filter_config(job, model, init)
+    if job["inputs"]["imu"]["gap_noise"]:
+        cfg.extra_noise = gap_noise(imu, ctx.imu_report["gaps"])  # bridged IMU gaps
+    res = run_filter(imu, init.state, meas, cfg, progress=ctx.progress)
+    return _filter_result(ctx, init, res, meas, model, len(imu))
+
+
+def run_riss(ctx: RunContext) -> JobResult:
+    """``[filter] process_model = "riss"``: the same initialization, aiding, evaluation and
+    summary as the strapdown job, with the RISS process model (:mod:`insgnss.filter.riss_model`);
+    the job's odometer is the process input (``aiding.odometer`` would use it twice)."""
+    from ..filter import riss_model
+
+    job, inputs, model = ctx.job, ctx.inputs, ctx.model
+    if inputs.odometer is None or not len(inputs.odometer):
+        raise ConfigError("the RISS process model needs an odometer (inputs.odometer.path or a "
+                          "simulated [odometer])", file=job.path, column="inputs.odometer.path")
+    if job["aiding"]["odometer"]:
+        raise ConfigError("with process_model = \"riss\" the odometer is the process input; "
+                          "switch aiding.odometer off", file=job.path, column="aiding.odometer")
+    init = initialize(job, inputs, model)
+    odo = inputs.odometer
+    t_odo = odo.index.to_numpy(float)
+    imu = inputs.imu.loc[max(init.state.time, t_odo[0]):t_odo[-1]]
+    if len(imu) < 2:
+        raise ConfigError("the odometer does not overlap the IMU data", file=job.path,
+                          column="inputs.odometer.path")
+    if float(imu.index[0]) != init.state.time:
+        init.state = init.state.copy()
+        init.state.time = float(imu.index[0])
+    meas = build_measurements(job, inputs, ctx.windows, imu)
+    cfg = filter_config(job, model, init)
+    # aiding.odometer_std is the odometer speed noise; filter.scale_factors estimates the
+    # vertical gyro scale factor
+    rcfg = riss_model.RissConfig(odometer_speed_std=float(job["aiding"]["odometer_std"]),
+                                 gyro_scale=bool(job["filter"]["scale_factors"]),
+                                 **job["filter"]["riss"])
+    res = riss_model.run_riss_filter(imu, odo, init.state, meas, cfg, rcfg)
+    return _filter_result(ctx, init, res, meas, model, len(imu))
+
+
+def run_foot(ctx: RunContext) -> JobResult:
+    """Foot-mounted pedestrian INS (:mod:`insgnss.foot`): compiled ZUPT/ZARU filter and
+    smoother; heading unobservable, so it is given (``[foot] heading``, default 0)."""
+    from ..foot import FootConfig, run_foot_ins
+
+    job, inputs = ctx.job, ctx.inputs
+    cfg = FootConfig.from_dict(job["foot"])
+    ini = job["initialization"]
+    lat = np.radians(ini["lat_deg"] or 0.0)
+    lon = np.radians(ini["lon_deg"] or 0.0)
+    h = ini["height"] or 0.0
+    c0 = time.perf_counter()
+    fr = run_foot_ins(inputs.imu, cfg, lat=lat, lon=lon, height=h)
+    run_s = time.perf_counter() - c0
+    inn = fr.innovations.reset_index()
+    inn = inn.rename(columns={inn.columns[0]: "time"})
+    inn.insert(1, "type", "zupt")
+    inn["accepted"] = True
+    res = PresetResult(forward=fr.forward.join(fr.std).join(fr.biases),
+                       smoothed=fr.trajectory if cfg.smooth else None, innovations=inn,
+                       rejected=inn.iloc[:0], timing={"total": run_s})
+    init = Initialization(fr.initial, "foot_levelling", "given")
+    out = evaluate_result(JobResult(job, inputs, init, ctx.windows, res))
+    out.summary = {
+        "job": job_name(job), "source": inputs.source, "complete": True, "error": None,
+        "preset": "foot", "imu_samples": int(len(inputs.imu)), "zupt_updates": fr.n_updates,
+        "initialization": initialization_summary(init),
+        "measurements": {"zupt": int(fr.stillness.still.sum())}, "rejected": {},
+        "imu": ctx.imu_report, "preprocessing": ctx.preprocessing,
+        "timing_s": {**ctx.timing, "total": run_s,
+                     "job_total": time.perf_counter() - ctx.t_start},
+        "evaluation": {k: v["summary"] for k, v in out.evaluation.items()},
+    }
+    return out
+
+
+#: process name -> the function that runs it
+PROCESSES: dict[str, Callable[[RunContext], JobResult]] = {
+    "strapdown": run_strapdown,
+    "riss": run_riss,
+    "foot": run_foot,
+}
+
+#: ``[process] preset`` -> the process it selects (None: ``[filter] process_model`` decides)
+PRESETS: dict[str, str | None] = {"standard": None, "foot": "foot"}
+
+
+def process_name(job: Job) -> str:
+    """The process a job runs (:data:`PRESETS`, then ``[filter] process_model``)."""
+    return PRESETS[job["process"]["preset"]] or job["filter"]["process_model"]
+
+
+def run_process(ctx: RunContext) -> JobResult:
+    """Run the job's process (:func:`process_name`) on a prepared run."""
+    return PROCESSES[process_name(ctx.job)](ctx)
+
+
+__all__ = ["PRESETS", "PROCESSES", "filter_config", "process_name", "run_foot", "run_process",
+           "run_riss", "run_strapdown"]

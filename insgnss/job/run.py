@@ -1,0 +1,68 @@
+"""Running a job: read the inputs, prepare them (IMU table policies, outage windows,
+IMU time offset), then run the job's process (:mod:`.processes`) - once, or once per IMU
+segment in split mode (:mod:`.segments`, which gets :func:`run_job` passed in) - and
+(:func:`process`) write its outputs."""
+
+from __future__ import annotations
+
+import time
+from pathlib import Path
+
+from ..config import Job
+from ..policies import check_imu_table, gap_policy, shift_report
+from ..preprocess import estimate_time_offset, shift_time
+from .context import RunContext
+from .inputs import Inputs, imu_model, load_inputs
+from .outputs import write_outputs
+from .processes import run_process
+from .result import JobResult
+from .segments import run_segments
+from .windows import outage_windows
+
+
+def prepare(job: Job, *, progress: bool | None = None, seed: int | None = None,
+            inputs: Inputs | None = None) -> RunContext:
+    """Read the inputs (unless given) and prepare them for a process: the IMU table policies
+    (:func:`insgnss.policies.check_imu_table`), the outage windows and, when asked, the
+    estimated IMU-GNSS time offset. ``inputs.imu`` is replaced by the prepared table."""
+    t_start = time.perf_counter()
+    inputs = load_inputs(job, seed) if inputs is None else inputs
+    t_read = time.perf_counter() - t_start
+    # duplicates, gaps and segments of the table actually processed (policies.py)
+    inputs.imu, imu_report = check_imu_table(inputs.imu, gap_policy(job),
+                                             job["inputs"]["imu"]["duplicates"])
+    model = inputs.imu_model or imu_model(job, None)
+    windows = outage_windows(job, inputs.gnss)
+    preprocessing = {}
+    if job["inputs"]["imu"]["estimate_time_offset"] and inputs.gnss is not None:
+        dt, info = estimate_time_offset(inputs.imu, inputs.gnss, windows)
+        inputs.imu = shift_time(inputs.imu, dt)
+        imu_report = shift_report(imu_report, dt)
+        inputs.imu.attrs.update({k: imu_report[k] for k in ("gaps", "segments",
+                                                            "dropped_duplicates")})
+        preprocessing["imu_time_offset_estimated_s"] = dt
+        preprocessing["imu_time_offset_info"] = info
+    show = job["outputs"]["progress"] if progress is None else progress
+    return RunContext(job=job, inputs=inputs, model=model, windows=windows,
+                      imu_report=imu_report, t_start=t_start, preprocessing=preprocessing,
+                      timing={"read": t_read}, progress=bool(show))
+
+
+def run_job(job: Job, *, progress: bool | None = None, seed: int | None = None,
+            inputs: Inputs | None = None) -> JobResult:
+    """Run a validated job in memory (no files written)."""
+    ctx = prepare(job, progress=progress, seed=seed, inputs=inputs)
+    if len(ctx.imu_report["segments"]) > 1:  # gap_policy = "split" and long gaps
+        return run_segments(ctx, lambda seg_job, seg_inputs: run_job(
+            seg_job, progress=progress, inputs=seg_inputs))
+    return run_process(ctx)
+
+
+def process(job: Job, out_dir: str | Path | None = None, *, progress: bool | None = None
+            ) -> tuple[JobResult, dict[str, Path]]:
+    """Run a job and write its outputs; returns the result and the written paths by name."""
+    res = run_job(job, progress=progress)
+    return res, write_outputs(res, out_dir)
+
+
+__all__ = ["prepare", "process", "run_job"]
