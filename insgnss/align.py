@@ -65,6 +65,27 @@ def level(f_mean) -> tuple[float, float]:
     return float(np.arctan2(-fx, fz)), float(np.arctan2(fy, np.hypot(fx, fz)))
 
 
+def level_moving(f_mean, accel_enu, heading: float, iterations: int = 4
+                 ) -> tuple[float, float]:
+    """Roll and pitch [rad] of a moving vehicle from the mean specific force ``f_mean`` (body
+    RFU) and the mean kinematic acceleration ``accel_enu`` [m/s^2] over the same interval (from
+    GNSS velocity), with the heading known.
+
+    ``f^b = C_l^b (a^l + (0, 0, g))``: levelling ``f^b`` alone (:func:`level`) tilts the
+    attitude by ``atan(a / g)`` - 14 deg at 2.5 m/s^2 of braking. The body-frame acceleration
+    ``C_l^b a^l`` is removed with the attitude of the previous iteration and the rest
+    levelled; the error contracts by ``|a| / g`` per iteration, so a few iterations suffice
+    for a land vehicle. With ``accel_enu = 0`` this is :func:`level`.
+    """
+    f = np.asarray(f_mean, float)
+    a = np.asarray(accel_enu, float)
+    r, p = level(f)
+    for _ in range(iterations):
+        C = euler_to_dcm(r, p, heading)
+        r, p = level(f - C.T @ a)  # the rest is C_l^b (0, 0, g): vertical up
+    return r, p
+
+
 def gyrocompass(w_mean, roll: float, pitch: float) -> float:
     """Heading [rad, 0..2pi) from the mean angular rate of a static IMU (seed eqs. 3-5)."""
     wl = Rx(pitch) @ Ry(roll) @ np.asarray(w_mean, float)

@@ -106,3 +106,23 @@ def test_magnetometer_and_velocity_heading():
     h = align.heading_from_velocity([1.0, 10.0, -3.0], [0.0, 0.0, -3.0], min_speed=2.0)
     assert np.isnan(h[0]) and h[1] == pytest.approx(np.pi / 2) and h[2] == pytest.approx(
         np.radians(225.0))
+
+
+def test_level_moving_removes_the_vehicle_acceleration():
+    """f^b = C_l^b (a^l + (0, 0, g)): with the acceleration known (GNSS) the tilt is exact;
+    levelling f^b alone tilts by about atan(a / g) (braking at 2.5 m/s^2: 14 deg)."""
+    from insgnss.align import level, level_moving
+
+    g = 9.80
+    for r, p, h, acc in [(0.02, -0.03, 1.2, (1.5, -2.0, 0.1)), (-0.1, 0.05, 4.0, (0.0, 0.0, 0.0)),
+                         (0.01, 0.2, 2.5, (-2.5, 0.3, -0.4))]:
+        C = euler_to_dcm(r, p, h)
+        f_b = C.T @ (np.asarray(acc) + np.array([0.0, 0.0, g]))
+        r1, p1 = level_moving(f_b, acc, h, iterations=8)
+        assert abs(r1 - r) < 1e-6 and abs(p1 - p) < 1e-6
+        r0, p0 = level(f_b)
+        tilt = np.hypot(r0 - r, p0 - p)
+        if np.any(acc):
+            assert tilt > 0.5 * np.arctan(np.hypot(acc[0], acc[1]) / g)
+        else:
+            assert tilt < 1e-12 and level_moving(f_b, acc, h) == (r0, p0)
