@@ -110,7 +110,7 @@ def run_batch_job(path: str, base: dict | None = None, out_dir: str | None = Non
     res = run_job(job, progress=False)
     s = res.summary
     row = {"job": s["job"] if s["job"] != "job" else p.stem, "file": str(p),
-           "status": "ok" if res.filter.complete else "incomplete", "error": s["error"] or "",
+           "status": "ok" if s["complete"] else "incomplete", "error": s["error"] or "",
            "imu_samples": s["imu_samples"]}
     fwd = res.filter.forward
     t = fwd.index.to_numpy(float) if fwd is not None and len(fwd) else None
@@ -119,8 +119,10 @@ def run_batch_job(path: str, base: dict | None = None, out_dir: str | None = Non
                duration_s=float(t[-1] - t[0]) if t is not None else float("nan"),
                initialization=s["initialization"]["method"],
                heading_source=s["initialization"]["heading_source"],
-               measurements=json.dumps(s["measurements"], sort_keys=True),
-               rejected=json.dumps(s["rejected"], sort_keys=True),
+               measurements=json.dumps({k: c["applied"] for k, c in s["measurements"].items()},
+                                       sort_keys=True),
+               rejected=json.dumps({k: c["rejected"] for k, c in s["measurements"].items()
+                                    if c["rejected"]}, sort_keys=True),
                filter_s=float(s["timing_s"].get("total", float("nan"))),
                total_s=float(s["timing_s"].get("job_total", float("nan"))))
     for sol in ("forward", "smoothed"):

@@ -54,7 +54,8 @@ from .detect import Stillness
 from .errors import ConfigError
 from .evaluate import position_errors
 from .filter.engine import FilterConfig, FilterResult, run_filter
-from .filter.measurements import Cupt, GnssPosition, GnssVelocity, Zaru, Zupt
+from .filter.measurements import Cupt, GnssPosition, GnssVelocity
+from .job.aiding import SpeedGatedZaru, SpeedGatedZupt
 from .mechanization.strapdown import NAV_COLS, NavState, mechanize
 
 RUNS = ("free", "zupt", "zupt_zaru", "zupt_cupt", "gnss", "job", "job_smoothed", "riss",
@@ -153,29 +154,6 @@ class CompareResult:
 
 
 # --- measurements ----------------------------------------------------------------------------
-class _SpeedGated:
-    """Mixin: evaluate only while the nominal speed is below ``max_speed``."""
-
-    max_speed = 0.0
-
-    def evaluate(self, i, nav):
-        if self.max_speed and np.linalg.norm(nav.vel) > self.max_speed:
-            return None
-        return super().evaluate(i, nav)
-
-
-class GatedZupt(_SpeedGated, Zupt):
-    def __init__(self, times, std, max_speed):
-        super().__init__(times, std=std)
-        self.max_speed = float(max_speed)
-
-
-class GatedZaru(_SpeedGated, Zaru):
-    def __init__(self, times, std, max_speed):
-        super().__init__(times, std=std)
-        self.max_speed = float(max_speed)
-
-
 def still_update_times(t: np.ndarray, still: np.ndarray, interval: float) -> np.ndarray:
     """Times of the still samples thinned to one per ``interval`` (the first kept)."""
     ts = np.asarray(t, float)[np.asarray(still, bool)]
@@ -482,24 +460,24 @@ def compare_runs(
         if run == "free":
             run_one(run, [])
         elif run == "zupt":
-            run_one(run, [GatedZupt(ts, s.zupt_std, s.max_speed)])
+            run_one(run, [SpeedGatedZupt(ts, s.zupt_std, s.max_speed)])
         elif run == "zupt_zaru":
-            run_one(run, [GatedZupt(ts, s.zupt_std, s.max_speed),
-                          GatedZaru(ts, s.zaru_std, s.max_speed)])
+            run_one(run, [SpeedGatedZupt(ts, s.zupt_std, s.max_speed),
+                          SpeedGatedZaru(ts, s.max_speed, std=s.zaru_std)])
         elif run == "zupt_cupt":
             cp = control_points
             times = np.asarray(cp.index, float) if cp.index.name == "time" else \
                 np.full(len(cp), np.nan)
             if np.isnan(times).any():  # position-triggered: locate with the ZUPT-only run
                 if "zupt" not in solutions:
-                    run_one("_zupt_locate", [GatedZupt(ts, s.zupt_std, s.max_speed)])
+                    run_one("_zupt_locate", [SpeedGatedZupt(ts, s.zupt_std, s.max_speed)])
                     base = solutions.pop("_zupt_locate")
                     results.pop("_zupt_locate")
                 else:
                     base = solutions["zupt"]
                 cp = cupt_times_from_positions(base, still_arr, cp, s.cupt_radius)
             cupt_times = np.asarray(cp.index, float)
-            meas = [GatedZupt(ts, s.zupt_std, s.max_speed)]
+            meas = [SpeedGatedZupt(ts, s.zupt_std, s.max_speed)]
             if len(cp):
                 meas.append(_cupt(cp, s.cupt_std))
             run_one(run, meas)

@@ -86,6 +86,12 @@ class RateMismatchError(InsgnssError):
     """The measured sample rate does not match the declared rate."""
 
 
+class NoUsableAidingError(InsgnssError):
+    """A job asks for an aiding source of which nothing can be applied (every epoch removed by
+    a quality filter, an outage window, the IMU time span, the innovation gate...); the message
+    names the step that removed the last of it."""
+
+
 class InsgnssWarning(_Located, UserWarning):
     """A problem insgnss repaired or tolerated (bridged gap, dropped duplicate, trimmed epoch).
 

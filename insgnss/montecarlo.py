@@ -337,6 +337,8 @@ def run_one(job: Job | dict | str | Path, seed: int, settings: MonteCarloSetting
     settings = settings or MonteCarloSettings.from_table(job.simulation.get("montecarlo"),
                                                          job.path)
     res = run_job(job, progress=False, seed=int(seed))
+    if res.failure is not None:
+        raise res.failure
     if not res.filter.complete:
         raise FilterHealthError(f"the filter stopped early: {res.filter.error}")
     return record_from_result(res, settings, seed)

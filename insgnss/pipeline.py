@@ -30,8 +30,10 @@ from .job.outputs import OUTPUT_NAMES, write_outputs
 from .job.processes import filter_config
 from .job.result import JobResult, PresetResult
 from .job.run import process, run_job
+from .job.summary import incomplete_reason, measurement_rows
 from .job.windows import outage_windows
 
 __all__ = ["OUTPUT_NAMES", "Inputs", "Initialization", "JobResult", "PresetResult",
-           "build_measurements", "evaluate_solution", "filter_config", "initialize",
-           "load_inputs", "outage_windows", "process", "run_job", "write_outputs"]
+           "build_measurements", "evaluate_solution", "filter_config", "incomplete_reason",
+           "initialize", "load_inputs", "measurement_rows", "outage_windows", "process",
+           "run_job", "write_outputs"]

@@ -181,10 +181,10 @@ def _summary_rows(summary: dict) -> str:
         f"{ini.get('method')} ({ini.get('heading_source')}): roll "
         f"{ini.get('roll_deg', 0):.2f}, pitch {ini.get('pitch_deg', 0):.2f}, heading "
         f"{ini.get('heading_deg', 0):.2f} deg") + "</td></tr>")
-    rows.append("<tr><th>measurements</th><td>" + html.escape(str(summary.get("measurements")))
-                + "</td></tr>")
-    rows.append("<tr><th>rejected</th><td>" + html.escape(str(summary.get("rejected")))
-                + "</td></tr>")
+    from .job.summary import measurement_rows
+
+    rows.append("<tr><th>measurements</th><td>" + "<br>".join(
+        html.escape(r) for r in measurement_rows(summary)) + "</td></tr>")
     timing = summary.get("timing_s", {})
     rows.append("<tr><th>timing [s]</th><td>" + html.escape(
         ", ".join(f"{k} {v:.2f}" for k, v in timing.items())) + "</td></tr>")

@@ -32,7 +32,10 @@ def test_riss_job_runs_end_to_end(tmp_path):
     s = res.summary
     assert s["complete"] and s["process_model"] == "riss"
     # 502 epochs overlap the RISS span; the first one gives the initial position, not an update
-    assert s["measurements"] == {"gnss_pos": 501, "gnss_vel": 501}
+    assert {k: c["offered"] for k, c in s["measurements"].items()} == \
+        {"gnss_pos": 501, "gnss_vel": 501}
+    for c in s["measurements"].values():  # applied + rejected = offered (no unusable epoch)
+        assert c["applied"] + c["rejected"] == 501 and c["applied"] > 490
     ev = s["evaluation"]
     print(f"\nRISS job (consumer MEMS, two 90 s outages): horizontal RMS forward "
           f"{ev['forward']['rms_h_m']:.2f} m, smoothed {ev['smoothed']['rms_h_m']:.2f} m")

@@ -77,7 +77,9 @@ def test_gate_recovery_follows_a_step_instead_of_running_away(quiet):
     res = run_job(job, inputs=inputs, progress=False)
     assert res.summary["complete"]
     assert res.filter.innovations["recovered"].sum() >= 1
-    assert 3 <= res.summary["rejected"]["gnss_pos"] <= 8
+    c = res.summary["measurements"]["gnss_pos"]
+    assert 3 <= c["rejected"] <= 8 and c["recovered"] >= 1
+    assert c["applied"] + c["rejected"] == c["offered"]
 
 
 def test_nis_config_is_validated():

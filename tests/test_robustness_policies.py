@@ -180,7 +180,8 @@ def test_gnss_outliers_are_rejected_and_listed(tmp_path):
     t_jump = g.index.to_numpy()[k]
     assert all(np.abs(t_rej - tj).min() < 1e-6 for tj in t_jump)
     assert len(t_rej) == k.size  # and nothing else
-    assert res.summary["rejected"]["gnss_pos"] == k.size
+    c = res.summary["measurements"]["gnss_pos"]
+    assert c["rejected"] == k.size and c["applied"] == c["offered"] - k.size
     assert (rej["nis"] > rej["threshold"]).all()
 
 

@@ -3,10 +3,13 @@ error-state filter and the RTS smoother with the job's aiding, evaluate against 
 and write the forward and smoothed trajectories, innovation and rejection logs, a JSON summary
 and an HTML report (docs/jobs.md).
 
-Exit status: 0 complete; 2 bad input or job (the error names file, row, column); 3 the filter
-stopped early (non-finite or non-positive-definite state, runaway NIS): the results up to the
-stop are written and marked by an INCOMPLETE file; 130 interrupted (Ctrl-C): the previous
-outputs are left as they were.
+Exit status: 0 complete; 2 bad input or job (the error names file, row, column), or an aiding
+source the job asks for of which nothing could be applied (every epoch removed by a quality
+filter, an outage window, the IMU span or the innovation gate: when this is found after the
+filter ran, the outputs are written for inspection and marked by an INCOMPLETE file); 3 the
+filter stopped early (non-finite or non-positive-definite state, runaway NIS): the results up
+to the stop are written and marked by an INCOMPLETE file; 130 interrupted (Ctrl-C): the
+previous outputs are left as they were.
 
 Example:
   insgnss process scenarios/drive_0708.toml -o out/drive
@@ -35,7 +38,7 @@ def register(p: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from ..config import load_job
-    from ..pipeline import run_job, write_outputs
+    from ..pipeline import incomplete_reason, run_job, write_outputs
 
     job = load_job(args.job)
     if args.no_report:
@@ -46,18 +49,23 @@ def run(args: argparse.Namespace) -> int:
     out = args.output or job.output_dir
     print(f"wrote {len(paths)} files to {out}")
     if not res.summary["complete"]:
-        print(f"insgnss process: INCOMPLETE: the filter stopped early at t = "
-              f"{res.summary.get('stopped_at')} s: {res.summary['error']}\n"
-              f"insgnss process: the results up to that time are in {out}, marked by the file "
-              f"INCOMPLETE and \"complete\": false in summary.json", file=sys.stderr)
+        print(f"insgnss process: INCOMPLETE: {incomplete_reason(res.summary).splitlines()[0]}\n"
+              f"insgnss process: the results are in {out}, marked by the file INCOMPLETE and "
+              f"\"complete\": false in summary.json", file=sys.stderr)
+        if res.failure is not None:
+            raise res.failure  # exit status 2 (cli.main)
         return EXIT_INCOMPLETE
     return 0
 
 
 def print_summary(res) -> None:
+    from ..pipeline import incomplete_reason
+
     s = res.summary
     if not s["complete"]:
-        print(f"INCOMPLETE: the filter stopped early: {s['error']}")
+        print(f"INCOMPLETE: {incomplete_reason(s).splitlines()[0]}")
+    for note in s.get("aiding_warnings") or []:
+        print(f"WARNING: {note}")
     imu = s.get("imu") or {}
     if imu.get("gaps") or imu.get("dropped_duplicates"):
         gaps = imu.get("gaps") or []

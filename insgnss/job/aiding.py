@@ -4,24 +4,58 @@ engine applies - GNSS position and velocity (outage windows withheld, quality fl
 control points, odometer speed.
 
 The models themselves (``z, H, R``) are in :mod:`insgnss.filter.measurements`; this module
-builds them from the job and the data.
+builds them from the job and the data, and keeps for each source the count of epochs each
+filter step leaves between the input and the filter (:class:`Source`). A job that asks for a
+source of which nothing can be applied stops with a :class:`~insgnss.errors.NoUsableAidingError`
+naming the step that removed the last epoch - before the filter runs when the inputs show it
+(:meth:`Aiding.require`), after it when the innovation gate rejected everything
+(:func:`applied_check`). When most of a source is not applied the run finishes with an
+:class:`~insgnss.errors.InsgnssWarning` and the summary flags it (``"aiding_warnings"``).
+
+Summary counts (``summary.json`` ``"measurements"``, per measurement type)::
+
+    offered    epochs handed to the filter (inside the IMU span, after the initial epoch,
+               outside the outage windows)
+    unusable   offered epochs the model cannot use (quality flag not admitted by
+               aiding.q_scale, non-finite values or sigmas)
+    applied    updates the filter made (innovation log ``accepted``)
+    rejected   epochs the innovation gate rejected (``accepted`` false)
+    recovered  applied updates forced by the gate recovery (``recovered``)
+
+Offered epochs that are neither applied, rejected nor unusable were skipped while the filter
+ran (the speed gate of ZUPT/ZARU, or after a filter that stopped early).
 """
 
 from __future__ import annotations
+
+import warnings
+from dataclasses import dataclass, field
 
 import numpy as np
 import pandas as pd
 
 from ..config import Job
-from ..errors import ConfigError, InputFormatError
-from ..filter.measurements import BodyVelocity, Cupt, GnssPosition, GnssVelocity, Zaru, Zupt
-from ..outages import in_windows
-from ..validate import check_gnss_in_imu_span
+from ..errors import ConfigError, InputFormatError, NoUsableAidingError
+from ..filter.measurements import (
+    BodyVelocity,
+    Cupt,
+    GnssPosition,
+    GnssVelocity,
+    Measurement,
+    Zaru,
+    Zupt,
+)
+from ..validate import check_gnss_in_imu_span, warn
 from .inputs import Inputs
+from .windows import describe_windows, outside_windows
+
+#: share of a source's offered epochs that may be unusable or rejected before the run warns
+MOST_REJECTED = 0.5
 
 
-class SpeedGatedZupt(Zupt):
-    """ZUPT applied only while the nominal speed is below ``max_speed``.
+class SpeedGated:
+    """Mixin of a still-time measurement (ZUPT, ZARU) applied only while the nominal speed is
+    below ``max_speed`` (0: always).
 
     An IMU stillness detector cannot tell steady straight motion from rest (both give constant
     specific force and no rotation; only vibration differs), so a vehicle at constant speed can
@@ -29,27 +63,34 @@ class SpeedGatedZupt(Zupt):
     extrapolation during outages) resolves that ambiguity.
     """
 
+    max_speed = 0.0
+
+    @property
+    def skip_reason(self) -> tuple[str, str]:
+        """Why nothing was applied when the gate skipped every epoch (message, job key)."""
+        return (f"the nominal speed was above aiding.zupt_max_speed = {self.max_speed:g} m/s "
+                "at every still time", "aiding.zupt_max_speed")
+
+    def evaluate(self, i, nav):
+        if self.max_speed and np.linalg.norm(nav.vel) > self.max_speed:
+            return None
+        return super().evaluate(i, nav)
+
+
+class SpeedGatedZupt(SpeedGated, Zupt):
+    """ZUPT applied only while the nominal speed is below ``max_speed`` (:class:`SpeedGated`)."""
+
     def __init__(self, times, std, max_speed: float, **kw):
         super().__init__(times, std=std, **kw)
         self.max_speed = float(max_speed)
 
-    def evaluate(self, i, nav):
-        if np.linalg.norm(nav.vel) > self.max_speed:
-            return None
-        return super().evaluate(i, nav)
 
-
-class SpeedGatedZaru(Zaru):
-    """ZARU applied only while the nominal speed is below ``max_speed`` (see SpeedGatedZupt)."""
+class SpeedGatedZaru(SpeedGated, Zaru):
+    """ZARU applied only while the nominal speed is below ``max_speed`` (:class:`SpeedGated`)."""
 
     def __init__(self, times, max_speed: float, **kw):
         super().__init__(times, **kw)
         self.max_speed = float(max_speed)
-
-    def evaluate(self, i, nav):
-        if np.linalg.norm(nav.vel) > self.max_speed:
-            return None
-        return super().evaluate(i, nav)
 
 
 def stillness_times(job: Job, imu: pd.DataFrame) -> np.ndarray:
@@ -74,73 +115,340 @@ def stillness_times(job: Job, imu: pd.DataFrame) -> np.ndarray:
     return ts[keep]
 
 
-def build_measurements(job: Job, inputs: Inputs, windows, imu: pd.DataFrame) -> list:
-    """Aiding measurement models of the job (GNSS with outages removed, ZUPT, ZARU, NHC, CUPT,
-    odometer)."""
+@dataclass
+class Step:
+    """One filter step between an aiding source's input and the filter.
+
+    ``left`` epochs remain after it, described by ``kept`` (``"outside the outage windows"``);
+    ``cause`` is the message when it removes the last one, ``removed`` says in a few words what
+    it removes, ``column`` is the column or job key the cause names.
+    """
+
+    left: int
+    kept: str
+    cause: str = ""
+    column: str | None = None
+    removed: str = ""
+
+
+@dataclass
+class Source:
+    """An aiding source the job asks for (``key``, e.g. ``"aiding.gnss_position"``), its
+    measurement type (``kind``, as in the logs), the filter steps from its input to the filter
+    and the model built from what is left (None when nothing is left)."""
+
+    key: str
+    kind: str
+    what: str
+    steps: list[Step]
+    model: Measurement | None = None
+    file: str | None = None
+    #: index of the step whose epochs are the model's epochs (the filter is offered them)
+    offered_step: int = -1
+    #: the data must provide it (GNSS, odometer, control points: a run without any is not
+    #: what the job asks for); ZUPT/ZARU depend on the vehicle stopping, and a run without a
+    #: stop only warns
+    required: bool = True
+
+    @property
+    def usable(self) -> int:
+        """Epochs left after every step."""
+        return self.steps[-1].left if self.steps else 0
+
+    def trail(self, upto: int | None = None) -> str:
+        steps = self.steps if upto is None else self.steps[:upto + 1]
+        return ", ".join(f"{s.left} {s.kept}" for s in steps)
+
+    def failure(self) -> NoUsableAidingError | None:
+        """The error of a source of which nothing is left (None if something is)."""
+        if self.usable:
+            return None
+        k = next(i for i, s in enumerate(self.steps) if s.left == 0)
+        s = self.steps[k]
+        return NoUsableAidingError(
+            f"{self.key} = true asks for {self.what}, but none can be applied: {s.cause} "
+            f"(epochs left after each step: {self.trail(k)})", file=self.file, column=s.column)
+
+    def unusable_causes(self) -> str:
+        """Why offered epochs are unusable (the steps after the offered one that remove any)."""
+        out = []
+        prev = self.steps[self.offered_step].left
+        for s in self.steps[self.offered_step + 1:]:
+            if s.left < prev:
+                out.append(f"{prev - s.left} {s.removed}")
+            prev = s.left
+        return "; ".join(out)
+
+
+@dataclass
+class Aiding:
+    """The aiding sources of a job and their measurement models."""
+
+    sources: list[Source] = field(default_factory=list)
+
+    @property
+    def models(self) -> list[Measurement]:
+        return [s.model for s in self.sources if s.model is not None]
+
+    def require(self) -> None:
+        """Stop (:class:`~insgnss.errors.NoUsableAidingError`) when a required source the job
+        asks for has nothing left to apply (:attr:`Source.required`)."""
+        for s in self.sources:
+            err = s.failure() if s.required else None
+            if err is not None:
+                raise err
+
+
+def _source_file(table) -> str | None:
+    return None if table is None else table.attrs.get("source")
+
+
+def _gnss_sources(job: Job, gnss: pd.DataFrame, lever_arm, windows, imu: pd.DataFrame
+                  ) -> list[Source]:
+    """GNSS position / velocity sources: IMU span -> after the initial epoch -> outside the
+    outage windows -> quality flag admitted by ``q_scale`` -> finite values and sigmas."""
     a = job["aiding"]
-    out = []
-    gnss = inputs.gnss
-    if gnss is not None and len(gnss):
+    file = _source_file(gnss)
+    tg = gnss.index.to_numpy(float)
+    t0, t1 = float(imu.index[0]), float(imu.index[-1])
+    if not tg.size:
+        empty = [Step(0, "epochs in the GNSS data", "the GNSS data holds no epoch", "time")]
+        return [Source(key, kind, what, empty, None, file, 0) for key, kind, what in
+                (("aiding.gnss_position", "gnss_pos", "GNSS positions"),
+                 ("aiding.gnss_velocity", "gnss_vel", "GNSS velocities")) if a[key[7:]]]
+    steps = [Step(len(gnss), "epochs in the GNSS data")]
+    n_span = int(np.count_nonzero((tg >= t0) & (tg <= t1)))
+    steps.append(Step(n_span, "inside the IMU time span",
+                      f"every GNSS epoch lies outside the IMU time span {t0:.3f} .. {t1:.3f} s "
+                      f"(GNSS {tg[0]:.3f} .. {tg[-1]:.3f} s: different time bases or a time "
+                      "offset?)", gnss.attrs.get("time_column", "time")))
+    if n_span:
         g = check_gnss_in_imu_span(gnss, imu, policy="trim")  # warns, names the file/lines
-        # the initial position comes from the GNSS at the first IMU time: an epoch there would
-        # be used twice (initial state and update), with correlated errors
-        g = g[g.index > imu.index[0] + 1e-6]
-        g = g[~in_windows(g.index.to_numpy(float), windows)]
-        scale = {int(float(k)): float(v) for k, v in a["q_scale"].items()}
-        use_q = list(scale) if "q" in g.columns else None
-        if a["gnss_position"]:
-            std = a["gnss_position_std"]
-            if std is not None:
-                g = g.drop(columns=[c for c in GnssPosition.STD_COLS if c in g.columns])
-            kw = {"std": std} if std is not None else {}
-            if a["gnss_std_scale"] != 1.0 and std is None:
-                g = g.copy()
-                for c in GnssPosition.STD_COLS:
-                    g[c] = g[c] * a["gnss_std_scale"]
-            out.append(GnssPosition(g, lever_arm=inputs.lever_arm, std_scale=scale if use_q
-                                    else None, use_q=use_q, min_std=a["gnss_min_std"], **kw))
-        if a["gnss_velocity"]:
-            if "vel_e" not in g.columns:
-                raise InputFormatError("GNSS velocity aiding requested but the GNSS data has no "
-                                       "velocity", column="vel_e")
-            std = a["gnss_velocity_std"]
-            gv = g.drop(columns=[c for c in ("vel_e_std", "vel_n_std", "vel_u_std")
-                                 if c in g.columns]) if std is not None else g
-            out.append(GnssVelocity(gv, lever_arm=inputs.lever_arm,
-                                    std_scale=scale if use_q else None, use_q=use_q,
-                                    **({"std": std} if std is not None else {})))
-    if a["zupt"] or a["zaru"]:
-        ts = stillness_times(job, imu)
-        if ts.size:
-            vmax = a["zupt_max_speed"]
-            if a["zupt"]:
-                out.append(SpeedGatedZupt(ts, a["zupt_std"], vmax) if vmax else
-                           Zupt(ts, std=a["zupt_std"]))
-            if a["zaru"]:
-                out.append(SpeedGatedZaru(ts, vmax) if vmax else Zaru(ts))
-    if a["nhc"]:
-        t = imu.index.to_numpy(float)
-        tn = t[0] + np.arange(1, int((t[-1] - t[0]) / a["nhc_interval"])) * a["nhc_interval"]
-        out.append(BodyVelocity(tn, 0.0, axes=(0, 2), std=a["nhc_std"], name="nhc",
-                                misalignment_state="nhc_misalignment" if a["nhc_misalignment"]
-                                else None))
-    if a["cupt"]:
-        if inputs.control_points is None:
-            raise ConfigError("CUPT needs inputs.control_points.path", file=job.path,
-                              column="aiding.cupt")
-        out.append(Cupt.from_table(inputs.control_points,
-                                   **({} if "east_std" in inputs.control_points.columns else
-                                      {"std": job["inputs"]["control_points"]["std"]})))
-    if a["odometer"]:
-        if inputs.odometer is None or "speed" not in inputs.odometer.columns:
-            raise ConfigError("odometer aiding needs an odometer speed table", file=job.path,
-                              column="aiding.odometer")
-        o = inputs.odometer
-        o = o[(o.index > imu.index[0]) & (o.index <= imu.index[-1])]
-        out.append(BodyVelocity(o.index.to_numpy(float), o["speed"].to_numpy(float), axes=(1,),
-                                std=a["odometer_std"], scale_state="odometer_scale",
-                                name="odometer"))
+    else:
+        g = gnss.iloc[:0]
+    # the initial position comes from the GNSS at the first IMU time: an epoch there would
+    # be used twice (initial state and update), with correlated errors
+    g = g[g.index > imu.index[0] + 1e-6]
+    steps.append(Step(len(g), "after the initial epoch",
+                      f"the only epoch left is at the initialization time {t0:.3f} s (used for "
+                      "the initial state)", "initialization"))
+    g = outside_windows(g, windows)
+    steps.append(Step(len(g), "outside the outage windows",
+                      f"every remaining epoch lies inside an outage window "
+                      f"({describe_windows(windows)})", "outages"))
+    scale = {int(float(k)): float(v) for k, v in a["q_scale"].items()}
+    use_q = list(scale) if "q" in g.columns else None
+    if use_q is not None:
+        q = g["q"].to_numpy()
+        found = sorted({int(v) for v in q[np.isfinite(q)]} - set(use_q))
+        steps.append(Step(int(np.isin(q, use_q).sum()), "with a Q admitted by aiding.q_scale",
+                          f"every remaining epoch has Q = {', '.join(map(str, found))} (column "
+                          f"'q') and aiding.q_scale admits only Q = "
+                          f"{', '.join(map(str, sorted(use_q)))}", "q",
+                          "with a Q not admitted by aiding.q_scale"))
+    q_steps = steps
+    out = []
+    if a["gnss_position"]:
+        std = a["gnss_position_std"]
+        gp = g
+        if std is not None:
+            gp = gp.drop(columns=[c for c in GnssPosition.STD_COLS if c in gp.columns])
+        kw = {"std": std} if std is not None else {}
+        if a["gnss_std_scale"] != 1.0 and std is None:
+            gp = gp.copy()
+            for c in GnssPosition.STD_COLS:
+                gp[c] = gp[c] * a["gnss_std_scale"]
+        m = GnssPosition(gp, lever_arm=lever_arm, std_scale=scale if use_q else None,
+                         use_q=use_q, min_std=a["gnss_min_std"], **kw)
+        st = q_steps + [Step(int(m.valid.sum()), "with a finite position and sigma",
+                             "every remaining epoch has a non-finite position or sigma, or a "
+                             "sigma <= 0", "east_std" if std is None else
+                             "aiding.gnss_position_std", "with a non-finite position or sigma")]
+        out.append(Source("aiding.gnss_position", m.name, "GNSS positions", st, m, file, 3))
+    if a["gnss_velocity"]:
+        if "vel_e" not in g.columns:
+            raise InputFormatError("GNSS velocity aiding requested but the GNSS data has no "
+                                   "velocity", file=file, column="vel_e")
+        std = a["gnss_velocity_std"]
+        gv = g.drop(columns=[c for c in GnssVelocity.STD_COLS if c in g.columns]) \
+            if std is not None else g
+        m = GnssVelocity(gv, lever_arm=lever_arm, std_scale=scale if use_q else None,
+                         use_q=use_q, **({"std": std} if std is not None else {}))
+        st = q_steps + [Step(int(m.valid.sum()), "with a finite velocity and sigma",
+                             "every remaining epoch has a non-finite velocity or sigma, or a "
+                             "sigma <= 0", "vel_e_std" if std is None else
+                             "aiding.gnss_velocity_std", "with a non-finite velocity or sigma")]
+        out.append(Source("aiding.gnss_velocity", m.name, "GNSS velocities", st, m, file, 3))
     return out
 
 
-__all__ = ["SpeedGatedZaru", "SpeedGatedZupt", "build_measurements", "stillness_times"]
+def _in_span(n_all: int, n_in: int, what: str, t0: float, t1: float, column: str) -> list[Step]:
+    return [Step(n_all, what),
+            Step(n_in, "inside the IMU time span",
+                 f"every one lies outside the IMU time span {t0:.3f} .. {t1:.3f} s", column)]
+
+
+def build_aiding(job: Job, inputs: Inputs, windows, imu: pd.DataFrame) -> Aiding:
+    """The aiding sources of the job over the IMU table ``imu`` (the filter's span): GNSS with
+    the outage windows withheld, ZUPT, ZARU, NHC, CUPT, odometer."""
+    a = job["aiding"]
+    src = Aiding()
+    t = imu.index.to_numpy(float)
+    t0, t1 = float(t[0]), float(t[-1])
+    if inputs.gnss is not None:
+        src.sources += _gnss_sources(job, inputs.gnss, inputs.lever_arm, windows, imu)
+    if a["zupt"] or a["zaru"]:
+        ts = stillness_times(job, imu)
+        how = "the stillness detector ([aiding.detector])" if a["detector"] or \
+            not a["static_intervals"] else "aiding.static_intervals"
+        vmax = a["zupt_max_speed"]
+        for key, on in (("aiding.zupt", a["zupt"]), ("aiding.zaru", a["zaru"])):
+            if not on:
+                continue
+            m = None
+            if ts.size and key == "aiding.zupt":
+                m = SpeedGatedZupt(ts, a["zupt_std"], vmax) if vmax else \
+                    Zupt(ts, std=a["zupt_std"])
+            elif ts.size:
+                m = SpeedGatedZaru(ts, vmax) if vmax else Zaru(ts)
+            kind = "zupt" if key == "aiding.zupt" else "zaru"
+            src.sources.append(Source(
+                key, kind, "zero-velocity updates" if kind == "zupt" else
+                "zero angular-rate updates",
+                [Step(int(ts.size), "still times",
+                      f"{how} found no still period in the IMU data {t0:.3f} .. {t1:.3f} s",
+                      "aiding.detector" if how.startswith("the") else "aiding.static_intervals")],
+                m, _source_file(imu), 0, required=False))
+    if a["nhc"]:
+        tn = t[0] + np.arange(1, int((t[-1] - t[0]) / a["nhc_interval"])) * a["nhc_interval"]
+        m = BodyVelocity(tn, 0.0, axes=(0, 2), std=a["nhc_std"], name="nhc",
+                         misalignment_state="nhc_misalignment" if a["nhc_misalignment"]
+                         else None)
+        src.sources.append(Source(
+            "aiding.nhc", "nhc", "non-holonomic constraints",
+            [Step(int(tn.size), "constraint epochs",
+                  f"the IMU data ({t1 - t0:.3f} s) is shorter than two aiding.nhc_interval",
+                  "aiding.nhc_interval")], m if tn.size else None, _source_file(imu), 0))
+    if a["cupt"]:
+        cp = inputs.control_points
+        if cp is None:
+            raise ConfigError("CUPT needs inputs.control_points.path", file=job.path,
+                              column="aiding.cupt")
+        m = Cupt.from_table(cp, **({} if "east_std" in cp.columns else
+                                   {"std": job["inputs"]["control_points"]["std"]}))
+        tc = np.asarray(m.times, float)
+        n_in = int(np.count_nonzero((tc > t0) & (tc <= t1)))
+        src.sources.append(Source(
+            "aiding.cupt", m.name, "control point updates",
+            _in_span(len(cp), n_in, "control points", t0, t1, "time"),
+            m if n_in else None, _source_file(cp), 1))
+    if a["odometer"]:
+        o = inputs.odometer
+        if o is None or "speed" not in o.columns:
+            raise ConfigError("odometer aiding needs an odometer speed table", file=job.path,
+                              column="aiding.odometer")
+        n_all = len(o)
+        o = o[(o.index > imu.index[0]) & (o.index <= imu.index[-1])]
+        m = BodyVelocity(o.index.to_numpy(float), o["speed"].to_numpy(float), axes=(1,),
+                         std=a["odometer_std"], scale_state="odometer_scale", name="odometer")
+        src.sources.append(Source(
+            "aiding.odometer", "odometer", "odometer speeds",
+            _in_span(n_all, len(o), "odometer epochs", t0, t1, "time"),
+            m if len(o) else None, _source_file(inputs.odometer), 1))
+    return src
+
+
+def check_aiding(job: Job, inputs: Inputs, windows) -> None:
+    """Before the initialization: stop when the inputs show that a source the job asks for
+    has nothing to apply over the whole IMU table (the initialization would otherwise fail
+    with a message about its own symptom, or the run would go on unaided)."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # the build after the initialization warns
+        build_aiding(job, inputs, windows, inputs.imu).require()
+
+
+def build_measurements(job: Job, inputs: Inputs, windows, imu: pd.DataFrame) -> list:
+    """Aiding measurement models of the job (GNSS with outages removed, ZUPT, ZARU, NHC, CUPT,
+    odometer); see :func:`build_aiding`."""
+    return build_aiding(job, inputs, windows, imu).models
+
+
+def measurement_counts(aiding: Aiding, innovations: pd.DataFrame) -> dict:
+    """Offered, applied, rejected, recovered and unusable epochs per measurement type (module
+    docstring), from the models and the filter's innovation log."""
+    out = {}
+    for s in aiding.sources:
+        m = s.model
+        offered = 0 if m is None else int(len(m))
+        valid = getattr(m, "valid", None)
+        unusable = 0 if valid is None else int(offered - np.count_nonzero(valid))
+        log = innovations[innovations["type"] == s.kind] if len(innovations) else innovations
+        acc = log["accepted"].to_numpy(bool) if len(log) else np.zeros(0, bool)
+        rec = log["recovered"].to_numpy(bool) if len(log) and "recovered" in log else acc[:0]
+        out[s.kind] = {"offered": offered, "applied": int(acc.sum()),
+                       "rejected": int((~acc).sum()), "recovered": int(rec.sum()),
+                       "unusable": unusable}
+    return out
+
+
+def applied_check(job: Job, aiding: Aiding, counts: dict, innovations: pd.DataFrame,
+                  complete: bool) -> tuple[NoUsableAidingError | None, list[str]]:
+    """After the filter: the error of a required source of which the filter applied nothing
+    (the gate rejected everything, or a run-time gate skipped everything), and a warning text
+    for each source of which most was not applied, and for each source that is not required
+    (ZUPT, ZARU) of which nothing was applied (also emitted as
+    :class:`~insgnss.errors.InsgnssWarning`). A filter that stopped early is judged by its
+    health error, not here."""
+    failure, notes = None, []
+    for s in aiding.sources:
+        c = counts.get(s.kind)
+        err = s.failure()
+        if err is not None:  # not required (else require() stopped the run): a warning
+            notes.append(f"{s.kind}: none applied: {err.message}")
+            warn(notes[-1], file=s.file, column=err.column, stacklevel=2)
+            continue
+        if s.model is None or c is None or not c["offered"]:
+            continue
+        if complete and not c["applied"] and failure is None and not s.required:
+            cause, column = getattr(s.model, "skip_reason", (
+                "the filter evaluated none of them", None))
+            if c["rejected"]:
+                cause, column = f"the innovation gate rejected all {c['rejected']}", \
+                    "filter.gate_probability"
+            notes.append(f"{s.kind}: none of the {c['offered']} offered epochs applied: {cause}")
+            warn(notes[-1], file=s.file, column=column, stacklevel=2)
+            continue
+        if complete and not c["applied"] and failure is None:
+            if c["rejected"]:
+                log = innovations[innovations["type"] == s.kind]
+                ratio = log["nis"].to_numpy(float) / log["threshold"].to_numpy(float)
+                cause = (f"the innovation gate (filter.gate_probability = "
+                         f"{job['filter']['gate_probability']:g}) rejected all {c['rejected']} "
+                         f"evaluated epochs (median NIS {float(np.nanmedian(ratio)):.3g} times "
+                         "its threshold) and the gate recovery did not restore them")
+                column = "filter.gate_probability"
+            else:
+                cause, column = getattr(s.model, "skip_reason", (
+                    "the filter evaluated none of them", None))
+            failure = NoUsableAidingError(
+                f"{s.key} = true asks for {s.what}, but the filter applied none of the "
+                f"{c['offered']} offered epochs: {cause}", file=s.file, column=column)
+            continue
+        lost = c["unusable"] + c["rejected"]
+        if lost > MOST_REJECTED * c["offered"]:
+            why = []
+            if c["unusable"]:
+                why.append(f"{c['unusable']} unusable ({s.unusable_causes()})")
+            if c["rejected"]:
+                why.append(f"{c['rejected']} rejected by the innovation gate")
+            text = (f"{s.kind}: {lost} of {c['offered']} offered epochs not applied "
+                    f"({', '.join(why)}); the solution rests on the other {c['applied']}")
+            notes.append(text)
+            warn(text, file=s.file, column=s.key, stacklevel=2)
+    return failure, notes
+
+
+__all__ = ["MOST_REJECTED", "Aiding", "Source", "SpeedGated", "SpeedGatedZaru", "SpeedGatedZupt",
+           "Step",
+           "applied_check", "build_aiding", "build_measurements", "check_aiding",
+           "measurement_counts", "stillness_times"]

@@ -7,8 +7,16 @@
   measured from the start to that epoch (a free-inertial run with the levelled attitude);
 - ``gnss_velocity``: start at the first GNSS epoch faster than ``min_speed`` with the GNSS
   position and velocity, heading = course over ground (no side slip), roll/pitch from the
-  accelerometers (averaged over 1 s) or given;
+  accelerometers averaged over 1 s with the vehicle's acceleration over that second (GNSS
+  velocity difference) removed (:func:`insgnss.align.level_moving`), or given;
 - ``given``: roll, pitch, heading given; position from the first GNSS epoch.
+
+GNSS inside the job's outage windows is withheld here as in the aiding
+(:func:`~insgnss.job.windows.outside_windows`): an initialization never uses an epoch the run
+is meant not to see, so a run (or a split segment) that starts in an outage starts from the
+first usable epoch after it. A position is taken from GNSS only at a time bracketed by usable
+epochs at most :data:`MAX_INTERPOLATION` seconds apart (never extrapolated, never across an
+outage).
 
 The alignment algorithms are in :mod:`insgnss.align`; this module chooses among them from the
 job and the data.
@@ -21,14 +29,22 @@ from dataclasses import dataclass
 import numpy as np
 import pandas as pd
 
-from ..align import can_gyrocompass, coarse_align, gyrocompass, level
+from ..align import can_gyrocompass, coarse_align, gyrocompass, level_moving
 from ..attitude import euler_to_dcm
 from ..config import Job
 from ..earth import enu_displacement_to_geodetic
-from ..errors import ConfigError
+from ..errors import AlignmentError, ConfigError
 from ..imu import ACCEL_COLS, DV_COLS, GYRO_COLS, ImuErrorModel
 from ..mechanization.strapdown import NavState, mechanize
 from .inputs import Inputs
+from .windows import describe_windows, outage_windows, outside_windows
+
+#: longest interval [s] between the two usable GNSS epochs an initial position is interpolated
+#: between (a few epochs of any GNSS rate in use; an outage window is far longer)
+MAX_INTERPOLATION = 2.0
+#: a GNSS epoch this close [s] to the initial time gives the position directly (the state time
+#: is an IMU sample, within one IMU interval of the epoch)
+NEAR_EPOCH = 0.02
 
 
 @dataclass
@@ -56,9 +72,65 @@ def _mean_specific_force(win: pd.DataFrame) -> np.ndarray:
     return win[DV_COLS].to_numpy()[1:].sum(0) / max(t[-1] - t[0], 1e-9)
 
 
-def _gnss_at(gnss: pd.DataFrame, t: float) -> np.ndarray:
+def _mean_acceleration(gnss: pd.DataFrame, t0: float, t1: float) -> np.ndarray | None:
+    """Mean ENU acceleration [m/s^2] over [t0, t1]: the GNSS velocity difference (velocities
+    interpolated between usable epochs), or None where they do not bracket the interval."""
+    tg = gnss.index.to_numpy(float)
+    if t1 <= t0 or tg.size < 2 or t0 < tg[0] or t1 > tg[-1]:
+        return None
+    k0, k1 = np.searchsorted(tg, [t0, t1])
+    if np.diff(tg[max(k0 - 1, 0):k1 + 1]).max(initial=0.0) > MAX_INTERPOLATION:
+        return None  # an outage inside: no velocity difference over it
+    v = [np.interp([t0, t1], tg, gnss[c].to_numpy(float)) for c in ("vel_e", "vel_n", "vel_u")]
+    return np.array([(b - a) / (t1 - t0) for a, b in v])
+
+
+def _gnss_at(gnss: pd.DataFrame, t: float, windows) -> np.ndarray:
+    """GNSS position at ``t`` interpolated between the usable epochs around it."""
     ti = gnss.index.to_numpy(float)
+    j = int(np.searchsorted(ti, t, side="right"))
+    near = float(np.min(np.abs(ti[max(j - 1, 0):j + 1] - t))) <= NEAR_EPOCH
+    if not near and (j == 0 or j == ti.size or ti[j] - ti[j - 1] > MAX_INTERPOLATION):
+        around = ", ".join(f"{x:.3f}" for x in ti[max(j - 1, 0):j + 1])
+        raise AlignmentError(
+            f"no usable GNSS epoch around t = {t:.3f} s to take the initial position from "
+            f"(nearest usable epochs: {around} s; GNSS inside {describe_windows(windows)} is "
+            "withheld, and a position is not extrapolated or interpolated over more than "
+            f"{MAX_INTERPOLATION:g} s)", file=gnss.attrs.get("source"), column="time")
     return np.array([np.interp(t, ti, gnss[c].to_numpy(float)) for c in ("lat", "lon", "height")])
+
+
+def _moving_epochs(gnss: pd.DataFrame, min_speed: float, t_from: float, t_to: float,
+                   *, strict: bool = False) -> np.ndarray:
+    """Indices of the GNSS epochs faster than ``min_speed`` in [t_from, t_to]."""
+    t = gnss.index.to_numpy(float)
+    sp = np.hypot(gnss["vel_e"].to_numpy(float), gnss["vel_n"].to_numpy(float))
+    after = t > t_from if strict else t >= t_from
+    return np.nonzero((sp > min_speed) & after & (t <= t_to))[0]
+
+
+def _no_moving_epoch(gnss: pd.DataFrame, all_gnss: pd.DataFrame, windows, min_speed: float,
+                     t_from: float, t_to: float, what: str) -> ConfigError:
+    """The error when no usable GNSS epoch is fast enough, naming what removed them."""
+    if not len(gnss):
+        cause = f"every GNSS epoch lies inside {describe_windows(windows)}"
+    else:
+        tg = gnss.index.to_numpy(float)
+        inside = (tg >= t_from) & (tg <= t_to)
+        if not inside.any():
+            cause = (f"no usable GNSS epoch between {t_from:.3f} and {t_to:.3f} s (usable GNSS "
+                     f"{tg[0]:.3f} .. {tg[-1]:.3f} s; the IMU data ends at {t_to:.3f} s)")
+        else:
+            fast = _moving_epochs(all_gnss, min_speed, t_from, t_to).size
+            sp = np.hypot(gnss["vel_e"].to_numpy(float), gnss["vel_n"].to_numpy(float))[inside]
+            cause = (f"GNSS never faster than initialization.min_speed = {min_speed:g} m/s "
+                     f"between {t_from:.3f} and {t_to:.3f} s (fastest usable epoch "
+                     f"{float(np.nanmax(sp)):.2f} m/s)")
+            if fast:
+                cause += (f"; {fast} faster epoch(s) lie inside {describe_windows(windows)}, "
+                          "withheld")
+    return ConfigError(f"{what}: {cause}", file=gnss.attrs.get("source") or
+                       all_gnss.attrs.get("source"), column="initialization.min_speed")
 
 
 def _antenna_to_imu(llh: np.ndarray, C: np.ndarray, lever_arm: np.ndarray) -> np.ndarray:
@@ -67,44 +139,79 @@ def _antenna_to_imu(llh: np.ndarray, C: np.ndarray, lever_arm: np.ndarray) -> np
     return llh + np.array([dlat, dlon, dh])
 
 
-def initialize(job: Job, inputs: Inputs, model: ImuErrorModel) -> Initialization:
-    """Initial nominal state of the filter (see the module docstring)."""
+def initialize(job: Job, inputs: Inputs, model: ImuErrorModel, windows=None) -> Initialization:
+    """Initial nominal state of the filter (see the module docstring).
+
+    ``windows`` are the outage windows whose GNSS is withheld (default: the job's,
+    :func:`~insgnss.job.windows.outage_windows`).
+    """
     ini = job["initialization"]
-    imu, gnss = inputs.imu, inputs.gnss
+    imu, all_gnss = inputs.imu, inputs.gnss
+    if all_gnss is not None and not len(all_gnss):
+        all_gnss = None
+    if windows is None:
+        windows = outage_windows(job, all_gnss)
+    gnss = None if all_gnss is None else outside_windows(all_gnss, windows)
     t0 = float(imu.index[0]) if ini["start_time"] is None else float(ini["start_time"])
     imu = imu.loc[t0:]
+    if len(imu) < 2:
+        raise AlignmentError(f"no IMU data after the start time {t0:.3f} s (IMU "
+                             f"{float(inputs.imu.index[0]):.3f} .. "
+                             f"{float(inputs.imu.index[-1]):.3f} s)", file=job.path,
+                             column="initialization.start_time")
+    t_last = float(imu.index[-1])
     method = ini["method"]
     given = [ini[k] for k in ("roll_deg", "pitch_deg", "heading_deg")]
-    if gnss is None or not len(gnss):
+    if gnss is None and inputs.truth is None:
+        raise ConfigError("initialization needs GNSS (or a simulated truth) for the position",
+                          file=job.path, column="inputs.gnss.path")
+    if gnss is not None and not len(gnss):
         if inputs.truth is None:
-            raise ConfigError("initialization needs GNSS (or a simulated truth) for the position",
-                              file=job.path, column="inputs.gnss.path")
+            raise AlignmentError(f"initialization needs a GNSS position, but every GNSS epoch "
+                                 f"lies inside {describe_windows(windows)}",
+                                 file=all_gnss.attrs.get("source"), column="outages")
+        gnss = None  # a simulation: the position from the truth
+
     def position_at(t, C):
-        if gnss is not None and len(gnss):
-            return _antenna_to_imu(_gnss_at(gnss, t), C, inputs.lever_arm)
+        if gnss is not None:
+            return _antenna_to_imu(_gnss_at(gnss, t, windows), C, inputs.lever_arm)
         r = inputs.truth.iloc[inputs.truth.index.get_indexer([t], method="nearest")[0]]
         return np.array([r["lat"], r["lon"], r["height"]])
 
     pos_std = ini["position_std"]
-    if pos_std is None:  # the GNSS sigmas of the start, per axis (east, north, up)
-        cols = ("east_std", "north_std", "up_std")
-        pos_std = tuple(float(np.nanmedian(gnss[c])) for c in cols) if gnss is not None and \
-            all(c in gnss.columns for c in cols) else 1.0
+    cols = ("east_std", "north_std", "up_std")
+    if pos_std is None and gnss is not None and all(c in gnss.columns for c in cols):
+        # the GNSS sigmas of the run, per axis (east, north, up); finite ones only
+        sig = gnss[list(cols)].to_numpy(float)
+        ok = np.all(np.isfinite(sig) & (sig > 0), axis=1)
+        pos_std = tuple(float(v) for v in np.median(sig[ok], axis=0)) if ok.any() else None
+    if pos_std is None:
+        pos_std = 1.0
     if method == "gnss_velocity":
         if gnss is None or "vel_e" not in gnss.columns:
             raise ConfigError("gnss_velocity initialization needs GNSS velocity", file=job.path,
                               column="initialization.method")
-        sp = np.hypot(gnss["vel_e"].to_numpy(), gnss["vel_n"].to_numpy())
-        k = np.nonzero((sp > ini["min_speed"]) & (gnss.index.to_numpy() >= t0))[0]
+        # the accelerometer window (1 s around the epoch, or after it) lies inside the IMU data
+        k = _moving_epochs(gnss, ini["min_speed"], t0, t_last - 1.0)
         if not k.size:
-            raise ConfigError("GNSS never faster than min_speed", file=job.path,
-                              column="initialization.min_speed", found=float(sp.max()))
+            raise _no_moving_epoch(gnss, all_gnss, windows, ini["min_speed"], t0, t_last - 1.0,
+                                   "gnss_velocity initialization")
         k = int(k[0])
         t_s = float(gnss.index[k])
         hdg = float(np.arctan2(gnss["vel_e"].iloc[k], gnss["vel_n"].iloc[k]))
-        win = imu.loc[t_s - 0.5: t_s + 0.5]
-        r, p = level(_mean_specific_force(win)) if given[0] is None else \
-            (np.radians(given[0]), np.radians(given[1] or 0.0))
+        if given[0] is None:
+            # 1 s around the epoch; after it when the GNSS before is withheld (an outage)
+            acc = None
+            for a0 in (t_s - 0.5, t_s):
+                win = imu.loc[a0: a0 + 1.0]
+                tw = win.index.to_numpy(float)
+                acc = _mean_acceleration(gnss, float(tw[0]), float(tw[-1]))
+                if acc is not None:
+                    break
+            r, p = level_moving(_mean_specific_force(win), np.zeros(3) if acc is None else acc,
+                                hdg)
+        else:
+            r, p = np.radians(given[0]), np.radians(given[1] or 0.0)
         C = euler_to_dcm(r, p, hdg)
         t_imu = float(imu.index[imu.index.get_indexer([t_s], method="nearest")[0]])
         vel = gnss[["vel_e", "vel_n", "vel_u"]].iloc[k].to_numpy(float)
@@ -122,11 +229,11 @@ def initialize(job: Job, inputs: Inputs, model: ImuErrorModel) -> Initialization
     # static
     win = imu.loc[: t0 + ini["static_duration"]]
     heading = None if given[2] is None else np.radians(given[2])
-    src = "given" if heading is not None else ("gyrocompass" if can_gyrocompass(model, 0.0 if
-                                               gnss is None else float(gnss["lat"].iloc[0]))
-                                               else "gnss_course")
     lat_guess = float(gnss["lat"].iloc[0]) if gnss is not None and len(gnss) else \
         float(inputs.truth["lat"].iloc[0])
+    src = "given" if heading is not None else ("gyrocompass" if can_gyrocompass(model, 0.0 if
+                                               gnss is None else lat_guess)
+                                               else "gnss_course")
     res = coarse_align(win, lat_guess, 0.0, model=model,
                        heading=heading if heading is not None else 0.0,
                        heading_source="given" if src != "gyrocompass" else "gyrocompass",
@@ -146,7 +253,7 @@ def initialize(job: Job, inputs: Inputs, model: ImuErrorModel) -> Initialization
         tilt = (max(res.roll_std, np.radians(0.1)), max(res.pitch_std, np.radians(0.1)))
     att_std = (*tilt, res.heading_std if np.isfinite(res.heading_std) else np.radians(5.0))
     if src == "gnss_course":
-        hdg = _heading_from_course(imu, gnss, res, ini["min_speed"], w_mean)
+        hdg = _heading_from_course(imu, gnss, all_gnss, windows, res, ini["min_speed"], w_mean)
         att_std = (att_std[0], att_std[1], np.radians(3.0))
     elif src == "gyrocompass":
         hdg = gyrocompass(w_mean, res.roll, res.pitch) if w_mean is not None else res.heading
@@ -160,15 +267,17 @@ def initialize(job: Job, inputs: Inputs, model: ImuErrorModel) -> Initialization
                           levelled=bool(job["filter"]["levelling_correlation"]))
 
 
-def _heading_from_course(imu, gnss, res, min_speed, w_mean) -> float:
+def _heading_from_course(imu, gnss, all_gnss, windows, res, min_speed, w_mean) -> float:
+    """Heading at the end of the static window: the course over ground at the first usable
+    GNSS epoch faster than ``min_speed`` minus the heading change the gyros measured since."""
     if gnss is None or "vel_e" not in gnss.columns:
         raise ConfigError("the IMU cannot gyrocompass: give initialization.heading_deg or GNSS "
                           "velocity", column="initialization.heading_deg")
-    sp = np.hypot(gnss["vel_e"].to_numpy(), gnss["vel_n"].to_numpy())
-    k = np.nonzero((sp > min_speed) & (gnss.index.to_numpy() > res.time))[0]
+    t_last = float(imu.index[-1])
+    k = _moving_epochs(gnss, min_speed, res.time, t_last, strict=True)
     if not k.size:
-        raise ConfigError("GNSS never faster than min_speed: cannot get the heading",
-                          column="initialization.min_speed")
+        raise _no_moving_epoch(gnss, all_gnss, windows, min_speed, res.time, t_last,
+                               "cannot get the heading from the GNSS course")
     k = int(k[0])
     tm = float(gnss.index[k])
     course = float(np.arctan2(gnss["vel_e"].iloc[k], gnss["vel_n"].iloc[k]))

@@ -11,6 +11,7 @@ from ..evaluate import move_point
 from ..io.native import atomic_write, atomic_write_text, jsonable, write_table
 from ..io.outputset import MARKER, OutputSet
 from .result import JobResult
+from .summary import incomplete_reason
 
 #: every file name write_outputs may produce (a previous run's files that a new run does not
 #: produce are removed when the new set is committed, so a folder never mixes two runs)
@@ -29,7 +30,9 @@ def write_outputs(result: JobResult, out_dir: str | Path | None = None) -> dict[
     interrupted run leaves the previous outputs complete, or (interrupted during the final
     renames) a set marked by an ``INCOMPLETE`` file. A run whose filter stopped early writes
     what it computed and keeps ``INCOMPLETE`` (with the reason; ``summary.json`` has
-    ``"complete": false``, the error and ``"stopped_at"``). No output may overwrite an input.
+    ``"complete": false``, the error and ``"stopped_at"``); so does a run that went to its end
+    but applied nothing of an aiding source it asks for (``result.failure``). No output may
+    overwrite an input.
     """
     job = result.job
     out = Path(out_dir) if out_dir is not None else job.output_dir
@@ -81,10 +84,7 @@ def write_outputs(result: JobResult, out_dir: str | Path | None = None) -> dict[
             from ..report import write_report
 
             write_report(result, dest("report.html"))
-        reason = "" if complete else (
-            f"The filter stopped early at t = {summary.get('stopped_at')} s: "
-            f"{summary.get('error')}\nThe trajectories and logs end there (summary.json has "
-            '"complete": false).')
+        reason = incomplete_reason({**summary, "complete": complete})
         return outs.commit(complete=complete, reason=reason)
 
 

@@ -27,17 +27,17 @@ from collections.abc import Callable
 import numpy as np
 
 from ..config import Job
-from ..errors import ConfigError
+from ..errors import ConfigError, NoUsableAidingError
 from ..filter.engine import FilterConfig, run_filter
 from ..imu import ImuErrorModel
 from ..policies import gap_noise
 from ..preprocess import with_static_noise
-from .aiding import build_measurements
+from .aiding import Aiding, applied_check, build_aiding, check_aiding, measurement_counts
 from .context import RunContext
 from .evaluation import evaluate_result
 from .initialization import Initialization, initialize
 from .result import JobResult, PresetResult
-from .summary import filter_summary, initialization_summary, job_name
+from .summary import filter_summary, initialization_summary, job_name, status
 
 
 def filter_config(job: Job, model: ImuErrorModel, init: Initialization) -> FilterConfig:
@@ -56,11 +56,15 @@ def filter_config(job: Job, model: ImuErrorModel, init: Initialization) -> Filte
         gyro_bias=None if init.gyro_bias is None else tuple(init.gyro_bias))
 
 
-def _filter_result(ctx: RunContext, init: Initialization, res, meas, model: ImuErrorModel,
-                   n_imu: int) -> JobResult:
-    """Evaluate a finished filter run and build its :class:`JobResult` with the summary."""
-    out = evaluate_result(JobResult(ctx.job, ctx.inputs, init, ctx.windows, res))
-    out.summary = filter_summary(out, meas, model.name, n_imu, ctx.t_start, ctx.timing,
+def _filter_result(ctx: RunContext, init: Initialization, res, aiding: Aiding,
+                   model: ImuErrorModel, n_imu: int) -> JobResult:
+    """Evaluate a finished filter run, check what it applied of each aiding source and build
+    its :class:`JobResult` with the summary."""
+    out = evaluate_result(JobResult(ctx.job, ctx.inputs, init, ctx.windows, res, model=model))
+    counts = measurement_counts(aiding, res.innovations)
+    out.failure, notes = applied_check(ctx.job, aiding, counts, res.innovations, res.complete)
+    out.summary = filter_summary(out, counts, notes, model.name, n_imu, ctx.t_start,
+                                 ctx.timing,
                                  {"imu": ctx.imu_report, "preprocessing": ctx.preprocessing})
     return out
 
@@ -68,18 +72,20 @@ def _filter_result(ctx: RunContext, init: Initialization, res, meas, model: ImuE
 def run_strapdown(ctx: RunContext) -> JobResult:
     """LLF strapdown error-state filter (+ smoother) with the job's aiding."""
     job, inputs, model = ctx.job, ctx.inputs, ctx.model
-    init = initialize(job, inputs, model)
+    check_aiding(job, inputs, ctx.windows)
+    init = initialize(job, inputs, model, ctx.windows)
     if job["filter"]["noise_from_static"] and init.static_end is not None:
         model = with_static_noise(model, inputs.imu.loc[:init.static_end])
         ctx.preprocessing["gyro_arw_deg_sqrt_h"] = float(np.degrees(model.gyro_arw) * 60)
         ctx.preprocessing["accel_vrw_m_s_sqrt_h"] = float(model.accel_vrw * 60)
     imu = inputs.imu.loc[init.state.time:]
-    meas = build_measurements(job, inputs, ctx.windows, imu)
+    aiding = build_aiding(job, inputs, ctx.windows, imu)
+    aiding.require()
     cfg = filter_config(job, model, init)
     if job["inputs"]["imu"]["gap_noise"]:
         cfg.extra_noise = gap_noise(imu, ctx.imu_report["gaps"])  # bridged IMU gaps
-    res = run_filter(imu, init.state, meas, cfg, progress=ctx.progress)
-    return _filter_result(ctx, init, res, meas, model, len(imu))
+    res = run_filter(imu, init.state, aiding.models, cfg, progress=ctx.progress)
+    return _filter_result(ctx, init, res, aiding, model, len(imu))
 
 
 def run_riss(ctx: RunContext) -> JobResult:
@@ -95,7 +101,8 @@ def run_riss(ctx: RunContext) -> JobResult:
     if job["aiding"]["odometer"]:
         raise ConfigError("with process_model = \"riss\" the odometer is the process input; "
                           "switch aiding.odometer off", file=job.path, column="aiding.odometer")
-    init = initialize(job, inputs, model)
+    check_aiding(job, inputs, ctx.windows)
+    init = initialize(job, inputs, model, ctx.windows)
     odo = inputs.odometer
     t_odo = odo.index.to_numpy(float)
     imu = inputs.imu.loc[max(init.state.time, t_odo[0]):t_odo[-1]]
@@ -105,15 +112,16 @@ def run_riss(ctx: RunContext) -> JobResult:
     if float(imu.index[0]) != init.state.time:
         init.state = init.state.copy()
         init.state.time = float(imu.index[0])
-    meas = build_measurements(job, inputs, ctx.windows, imu)
+    aiding = build_aiding(job, inputs, ctx.windows, imu)
+    aiding.require()
     cfg = filter_config(job, model, init)
     # aiding.odometer_std is the odometer speed noise; filter.scale_factors estimates the
     # vertical gyro scale factor
     rcfg = riss_model.RissConfig(odometer_speed_std=float(job["aiding"]["odometer_std"]),
                                  gyro_scale=bool(job["filter"]["scale_factors"]),
                                  **job["filter"]["riss"])
-    res = riss_model.run_riss_filter(imu, odo, init.state, meas, cfg, rcfg)
-    return _filter_result(ctx, init, res, meas, model, len(imu))
+    res = riss_model.run_riss_filter(imu, odo, init.state, aiding.models, cfg, rcfg)
+    return _filter_result(ctx, init, res, aiding, model, len(imu))
 
 
 def run_foot(ctx: RunContext) -> JobResult:
@@ -139,11 +147,19 @@ def run_foot(ctx: RunContext) -> JobResult:
                        rejected=inn.iloc[:0], timing={"total": run_s})
     init = Initialization(fr.initial, "foot_levelling", "given")
     out = evaluate_result(JobResult(job, inputs, init, ctx.windows, res))
+    still = int(fr.stillness.still.sum())
+    if not fr.n_updates:
+        out.failure = NoUsableAidingError(
+            f"the foot-mounted INS rests on zero-velocity updates, but the stance detector "
+            f"([foot.detector]) found {still} still sample(s) and the filter applied none",
+            file=inputs.imu.attrs.get("source"), column="foot.detector")
     out.summary = {
-        "job": job_name(job), "source": inputs.source, "complete": True, "error": None,
+        "job": job_name(job), "source": inputs.source, **status(out),
         "preset": "foot", "imu_samples": int(len(inputs.imu)), "zupt_updates": fr.n_updates,
         "initialization": initialization_summary(init),
-        "measurements": {"zupt": int(fr.stillness.still.sum())}, "rejected": {},
+        "measurements": {"zupt": {"offered": still, "applied": int(fr.n_updates),
+                                  "rejected": 0, "recovered": 0, "unusable": 0}},
+        "aiding_warnings": [],
         "imu": ctx.imu_report, "preprocessing": ctx.preprocessing,
         "timing_s": {**ctx.timing, "total": run_s,
                      "job_total": time.perf_counter() - ctx.t_start},

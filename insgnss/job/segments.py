@@ -2,12 +2,20 @@
 merged into one result.
 
 The first segment uses the job's initialization; each later one starts at its first sample
-with the job's method and falls back to ``gnss_velocity`` (GNSS position, velocity and course
-over ground) when that fails (a static alignment while the vehicle moves); moving at the
-segment start (GNSS speed above ``initialization.min_speed``), ``gnss_velocity`` is tried
-first. A segment that cannot be initialized, or has fewer than :data:`MIN_SEGMENT_SAMPLES`
-samples, is skipped with a warning and recorded. The outputs hold the segments one after the
-other, with a ``segment`` column; the filter state and the smoother never cross a long gap.
+(or the first usable GNSS epoch after it) with the job's method and falls back to
+``gnss_velocity`` (GNSS position, velocity and course over ground) when that fails (a static
+alignment while the vehicle moves); moving at the segment start (GNSS speed above
+``initialization.min_speed``), ``gnss_velocity`` is tried first. A segment that cannot be
+initialized (the first one too), or has fewer than :data:`MIN_SEGMENT_SAMPLES` samples, is
+skipped with a warning and recorded; when no segment can be processed, the first segment's
+error stops the run. The outputs hold the segments one after the other, with a ``segment``
+column; the filter state and the smoother never cross a long gap.
+
+What belongs to the sensor rather than to a segment carries over: the IMU time offset (applied
+once to the whole table) and the IMU noise measured in a static window
+(``filter.noise_from_static``): a later segment that starts moving cannot measure it and
+would otherwise run with the datasheet noise, overconfident on a vibrating vehicle. The outage
+windows of the whole run hold in every segment, for its initialization as for its aiding.
 
 This module does not run a segment itself: the caller (:mod:`.run`) passes the single-run
 function in, so that the segment logic does not depend on the step that calls it.
@@ -27,9 +35,11 @@ from ..errors import InsgnssError
 from ..validate import warn
 from .context import RunContext
 from .evaluation import evaluate_result
+from .initialization import MAX_INTERPOLATION
 from .inputs import Inputs
 from .result import JobResult
-from .summary import rejected_counts
+from .summary import add_counts
+from .windows import outside_windows
 
 #: fewest IMU samples a split segment needs to be processed
 MIN_SEGMENT_SAMPLES = 100
@@ -68,6 +78,8 @@ def run_segments(ctx: RunContext, run_one: SegmentRunner) -> JobResult:
     imu = inputs.imu
     t = np.asarray(imu.index, float)
     results, info = [], []
+    model = inputs.imu_model  # the IMU error model; later segments get the one segment 0 used
+    first_error = None
     for k, (a, b) in enumerate(ctx.imu_report["segments"]):
         i0, i1 = np.searchsorted(t, a, "left"), np.searchsorted(t, b, "right")
         rec = {"segment": k, "start": float(a), "end": float(b), "samples": int(i1 - i0)}
@@ -80,16 +92,21 @@ def run_segments(ctx: RunContext, run_one: SegmentRunner) -> JobResult:
         seg_imu = imu.iloc[i0:i1]
         gnss = inputs.gnss
         if gnss is not None:
+            # from MAX_INTERPOLATION before the segment: the initial position at its first
+            # sample is interpolated between GNSS epochs around it (the aiding takes only the
+            # epochs inside the segment)
             gt = np.asarray(gnss.index, float)
-            gnss = gnss.iloc[np.searchsorted(gt, a, "left"):np.searchsorted(gt, b, "right")]
-        seg_inputs = replace(inputs, imu=seg_imu, gnss=gnss)
+            gnss = gnss.iloc[np.searchsorted(gt, a - MAX_INTERPOLATION, "left"):
+                             np.searchsorted(gt, b, "right")]
+        seg_inputs = replace(inputs, imu=seg_imu, gnss=gnss, imu_model=model)
         start = None if k == 0 else float(a)
         methods = [None]
         if k > 0 and job["initialization"]["method"] != "gnss_velocity" and gnss is not None \
                 and "vel_e" in gnss.columns and len(gnss):
             # moving at the segment start (GNSS speed): start from GNSS position, velocity and
             # course; standing: the job's own method (e.g. a static alignment) first
-            moving = float(np.hypot(gnss["vel_e"].iloc[0], gnss["vel_n"].iloc[0])) > \
+            g0 = outside_windows(gnss.loc[a:], windows)  # usable GNSS only
+            moving = len(g0) and float(np.hypot(g0["vel_e"].iloc[0], g0["vel_n"].iloc[0])) > \
                 job["initialization"]["min_speed"]
             methods = ["gnss_velocity", None] if moving else [None, "gnss_velocity"]
         res, errors = None, []
@@ -98,8 +115,7 @@ def run_segments(ctx: RunContext, run_one: SegmentRunner) -> JobResult:
                 res = run_one(segment_job(job, windows, start, m), replace(seg_inputs))
                 break
             except InsgnssError as exc:
-                if k == 0:
-                    raise
+                first_error = first_error or exc
                 errors.append(f"{m or job['initialization']['method']}: {exc}")
         if res is None:
             rec["skipped"] = "; ".join(errors)
@@ -107,22 +123,31 @@ def run_segments(ctx: RunContext, run_one: SegmentRunner) -> JobResult:
                  f"{rec['skipped']}", file=imu.attrs.get("source"))
             continue
         rec.update(initialization=res.summary["initialization"]["method"],
+                   init_time=res.summary["initialization"]["time"],
                    complete=res.summary["complete"], error=res.summary["error"],
+                   stopped_at=res.summary.get("stopped_at"),
                    evaluation={n: {key: e.get(key) for key in ("rms_h_m", "max_h_m", "n_covered")}
                                for n, e in res.summary["evaluation"].items()})
         results.append((k, res))
-    if not results:
-        raise InsgnssError("no IMU segment could be processed", file=imu.attrs.get("source"))
+        model = res.model or model
+    if not results:  # the first segment's error says why (a job or data problem)
+        raise first_error or InsgnssError("no IMU segment could be processed",
+                                          file=imu.attrs.get("source"))
     first = results[0][1]
     merged = merge_filter_results([(k, r.filter) for k, r in results])
     out = evaluate_result(JobResult(job, inputs, first.init, list(windows), merged))
+    # the first segment that did not finish, or finished unusable, is the run's status
+    bad = next(((k, r) for k, r in results if not r.summary["complete"]), None)
+    out.failure = None if bad is None else bad[1].failure
     summary = dict(first.summary)
     summary.update(
-        complete=bool(merged.complete), error=None if merged.error is None else str(merged.error),
+        complete=bad is None,
+        error=None if bad is None else f"IMU segment {bad[0]}: {bad[1].summary['error']}",
+        stopped_at=None if bad is None else bad[1].summary.get("stopped_at"),
         imu_samples=int(sum(r.summary["imu_samples"] for _, r in results)),
-        measurements={n: int(sum(r.summary["measurements"].get(n, 0) for _, r in results))
-                      for n in {n for _, r in results for n in r.summary["measurements"]}},
-        rejected=rejected_counts(merged.rejected),
+        measurements=add_counts([r.summary["measurements"] for _, r in results]),
+        aiding_warnings=[f"IMU segment {k}: {n}" for k, r in results
+                         for n in r.summary.get("aiding_warnings", [])],
         outages=[list(w) for w in windows], segments=info, imu=ctx.imu_report,
         preprocessing=dict(ctx.preprocessing),
         evaluation={k: v["summary"] for k, v in out.evaluation.items()})

@@ -1,5 +1,7 @@
 """The summary of a run (``summary.json``, docs/jobs.md): what ran, how it was initialized,
-the measurements, the outage windows, timing and the evaluation figures."""
+the measurements (offered, applied, rejected, recovered, unusable per type; see
+:mod:`.aiding`), the outage windows, timing and the evaluation figures; whether the run is
+complete and, if not, why (:func:`incomplete_reason`)."""
 
 from __future__ import annotations
 
@@ -29,29 +31,47 @@ def initialization_summary(init: Initialization, method: str | None = None,
             "pitch_deg": float(np.degrees(p)), "heading_deg": float(np.degrees(h))}
 
 
-def rejected_counts(rejected) -> dict:
-    """Rejections per measurement type from a rejection log."""
-    return rejected.groupby("type").size().astype(int).to_dict() if len(rejected) else {}
-
-
 def stopped_at(res) -> float | None:
     """Time [s] at which a filter that stopped early stopped (None when complete)."""
     final = getattr(res, "final", None)
     return None if res.complete or final is None else float(final.time)
 
 
-def filter_summary(out: JobResult, meas: list, model_name: str, n_imu: int, t_start: float,
-                   timing: dict, extra: dict) -> dict:
-    """Summary of a run of the filter engine (strapdown or RISS process model)."""
+def status(out: JobResult) -> dict:
+    """``complete``, ``error``, ``stopped_at`` of a run: incomplete when the filter stopped
+    early (its health error) or when an aiding source was not applied at all
+    (``out.failure``)."""
+    res = out.filter
+    err = res.error if res.error is not None else out.failure
+    return {"complete": bool(res.complete) and out.failure is None,
+            "error": None if err is None else str(err), "stopped_at": stopped_at(res)}
+
+
+def incomplete_reason(summary: dict) -> str:
+    """Why a run is incomplete, for the ``INCOMPLETE`` marker and the command line ("" when
+    complete)."""
+    if summary.get("complete", True):
+        return ""
+    t = summary.get("stopped_at")
+    if t is not None:
+        return (f"The filter stopped early at t = {t:.3f} s: {summary.get('error')}\n"
+                'The trajectories and logs end there (summary.json has "complete": false).')
+    return (f"The run is not usable: {summary.get('error')}\nThe trajectories and logs are "
+            'written for inspection (summary.json has "complete": false).')
+
+
+def filter_summary(out: JobResult, counts: dict, notes: list[str], model_name: str,
+                   n_imu: int, t_start: float, timing: dict, extra: dict) -> dict:
+    """Summary of a run of the filter engine (strapdown or RISS process model); ``counts``
+    are the measurement counts, ``notes`` the aiding warnings."""
     job, res = out.job, out.filter
     return {
         "job": job_name(job), "source": out.inputs.source, "seed": out.inputs.seed,
         "process_model": job["filter"]["process_model"],
-        "complete": bool(res.complete), "error": None if res.error is None else str(res.error),
-        "stopped_at": stopped_at(res),
+        **status(out),
         "imu_samples": int(n_imu), "initialization": initialization_summary(out.init),
-        "measurements": {m.name: int(len(m)) for m in meas},
-        "rejected": rejected_counts(res.rejected),
+        "measurements": counts,
+        "aiding_warnings": list(notes),
         "outages": [list(w) for w in out.windows],
         "imu_model": model_name,
         **extra,
@@ -60,5 +80,32 @@ def filter_summary(out: JobResult, meas: list, model_name: str, n_imu: int, t_st
     }
 
 
-__all__ = ["filter_summary", "initialization_summary", "job_name", "rejected_counts",
-           "stopped_at"]
+def measurement_rows(summary: dict) -> list[str]:
+    """One line per measurement type of ``summary["measurements"]``, e.g. ``"gnss_pos: 1510 of
+    1524 offered applied (14 rejected, 0 recovered by the gate recovery, 0 unusable)"``, then
+    the aiding warnings; for reports and printouts."""
+    rows = []
+    for kind, c in (summary.get("measurements") or {}).items():
+        if not isinstance(c, dict):  # a summary written before the counts had fields
+            rows.append(f"{kind}: {c}")
+            continue
+        rows.append(f"{kind}: {c.get('applied', 0)} of {c.get('offered', 0)} offered applied "
+                    f"({c.get('rejected', 0)} rejected, {c.get('recovered', 0)} recovered by "
+                    f"the gate recovery, {c.get('unusable', 0)} unusable)")
+    rows += [f"warning: {n}" for n in summary.get("aiding_warnings") or []]
+    return rows
+
+
+def add_counts(parts: list[dict]) -> dict:
+    """Measurement counts of several runs (segments) added per type and field."""
+    out: dict = {}
+    for counts in parts:
+        for kind, c in counts.items():
+            tot = out.setdefault(kind, dict.fromkeys(c, 0))
+            for k, v in c.items():
+                tot[k] = tot.get(k, 0) + int(v)
+    return out
+
+
+__all__ = ["add_counts", "filter_summary", "incomplete_reason", "initialization_summary",
+           "job_name", "measurement_rows", "status", "stopped_at"]

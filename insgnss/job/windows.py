@@ -2,7 +2,9 @@
 
 Explicit windows are relative to the first GNSS epoch (``relative_to = "first_gnss"``) or
 absolute; periodic outages (:func:`insgnss.outages.periodic_windows`) follow the drive benchmark
-protocol (shared/eval/README.md). GNSS inside a window is withheld from the whole run.
+protocol (shared/eval/README.md). GNSS inside a window is withheld from the whole run - from
+the aiding and from the initialization alike (:func:`outside_windows`, the one place this rule
+is applied).
 """
 
 from __future__ import annotations
@@ -11,7 +13,7 @@ import pandas as pd
 
 from ..config import Job
 from ..errors import ConfigError
-from ..outages import periodic_windows
+from ..outages import in_windows, periodic_windows
 
 
 def outage_windows(job: Job, gnss: pd.DataFrame | None) -> list[tuple[float, float]]:
@@ -34,4 +36,26 @@ def outage_windows(job: Job, gnss: pd.DataFrame | None) -> list[tuple[float, flo
     return sorted(wins)
 
 
-__all__ = ["outage_windows"]
+def outside_windows(table: pd.DataFrame, windows) -> pd.DataFrame:
+    """The rows of a time-indexed table (GNSS) outside the outage windows: what a run may use."""
+    if not windows or table is None or not len(table):
+        return table
+    keep = ~in_windows(table.index.to_numpy(float), windows)
+    if keep.all():
+        return table
+    out = table.loc[keep]
+    out.attrs = dict(table.attrs)
+    if out.attrs.get("source_rows") is not None and len(out.attrs["source_rows"]) == len(table):
+        out.attrs["source_rows"] = out.attrs["source_rows"][keep]
+    return out
+
+
+def describe_windows(windows) -> str:
+    """``"3 outage window(s), 40.000 .. 100.000 s"`` for messages."""
+    if not windows:
+        return "no outage window"
+    return f"{len(windows)} outage window(s) ([outages]) from {windows[0][0]:.3f} to " \
+        f"{max(b for _, b in windows):.3f} s"
+
+
+__all__ = ["describe_windows", "outage_windows", "outside_windows"]
