@@ -12,7 +12,8 @@ A job runs as a sequence of steps, each a small module of :mod:`insgnss.job`::
                                            (strapdown, RISS, foot) runs the filter engine
     (split runs)       job.segments        one run per IMU segment, merged
     evaluate_solution  job.evaluation      errors against the reference, outage metrics
-    (summary)          job.summary         summary.json
+    incomplete_reason  job.summary         summary.json; why a run is incomplete;
+    measurement_rows                       the measurement counts as text lines
     write_outputs      job.outputs         trajectories, logs, summary, report (one file set)
     run_job, process   job.run             all of the above in memory / and write the outputs
 
