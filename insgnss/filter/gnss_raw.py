@@ -11,11 +11,13 @@ states "nominal minus true"; ``l`` the IMU-to-antenna lever arm in the body fram
 nominal ``C_b^l``, ``u`` the unit line of sight antenna -> satellite in ENU, ``rho`` the range)::
 
     pseudorange   h = |x_s' - r_ant| + b + isb_S - c dt_s + T + I
-                  H_pos = -u^T,  H_att = u^T [(C l) x],  H_b = 1,  H_isb_S = 1
+                  g = -u + (dT/dh) e_up,  H_pos = g^T,  H_att = -g^T [(C l) x],
+                  H_b = 1,  H_isb_S = 1
     range rate    h = u . (v_s' - v_ant) + d - c dt_s_dot,    measured -lambda * Doppler
                   v_ant = v + C (w_ib x l) - w_il x (C l)
                   H_vel = -u^T,  H_att = -u^T ([w_il x][(C l) x] - [(C (w_ib x l)) x]),
-                  H_bg = -u^T C [l x],  H_pos = -(v_s' - v_ant)^T (I - u u^T) / rho,  H_d = 1
+                  H_bg = -u^T C [l x],  H_d = 1,
+                  H_pos = g^T = -(v_s' - v_ant)^T (I - u u^T) / rho,  H_att += -g^T [(C l) x]
 
 (``r_ant = r + C l`` so ``d r_ant = dr - [(C l) x] phi``; the attitude and gyro-bias rows of
 the range rate are the ones of :class:`.measurements.GnssVelocity` projected on ``-u``.)
@@ -230,7 +232,8 @@ class RawGnssMeasurement(Measurement):
         if key != self._cache_key:
             a, b = self.starts[k], self.starts[k + 1]
             rows = {c: v[a:b] for c, v in self.arrays.items()}
-            self._cache = epoch_model(rows, r, nav.lat, nav.lon, nav.height, self.times[i],
+            # troposphere at the antenna height; ENU axes of the IMU point (|l| << R)
+            self._cache = epoch_model(rows, r, nav.lat, nav.lon, nav.height + cl[2], self.times[i],
                                       self.iono_params, self.config, self.doy)
             self._cache_key = key
         return k, int(i - self.starts[k]), r, Cel, cl, self._cache
@@ -263,9 +266,10 @@ class Pseudorange(RawGnssMeasurement):
         if not m.el[j] >= self.config.elevation_mask:
             return None
         u = Cel @ m.los[j]
+        g = -u + np.array([0.0, 0.0, m.tropo_dh[j]])  # d h / d r_ant (ENU)
         H = np.zeros((1, nav.layout.n))
-        H[0, 0:3] = -u
-        H[0, 6:9] = u @ skew(cl)
+        H[0, 0:3] = g
+        H[0, 6:9] = -g @ skew(cl)
         h = m.pr[j] + self._clock_columns(H, nav, i, drift=False)
         z = np.array([h - self.arrays["pr"][i]])
         return z, H, np.array([[m.var_pr[j]]])
@@ -289,9 +293,10 @@ class Doppler(RawGnssMeasurement):
         u = Cel @ los
         dv = m.sat_vel[j] - v_ecef
         H = np.zeros((1, nav.layout.n))
-        H[0, 0:3] = (-(dv - los * (los @ dv)) / m.rho[j]) @ Cel.T
+        g = (-(dv - los * (los @ dv)) / m.rho[j]) @ Cel.T  # d h / d r_ant (ENU)
+        H[0, 0:3] = g
         H[0, 3:6] = -u
-        H[0, 6:9] = -u @ J_att
+        H[0, 6:9] = -u @ J_att - g @ skew(cl)  # antenna velocity, and position via C l
         H[0, 9:12] = -u @ J_bg
         h = m.rate[j] - u @ v_ant + self._clock_columns(H, nav, i, drift=True)
         lam = C_LIGHT / self.arrays["freq"][i]

@@ -194,6 +194,7 @@ class EpochModel:
     el: np.ndarray  #: elevation [rad]
     az: np.ndarray  #: azimuth [rad]
     tropo: np.ndarray  #: slant tropospheric delay [m]
+    tropo_dh: np.ndarray  #: its derivative with the receiver height [m/m]
     iono: np.ndarray  #: ionospheric delay [m]
     pr: np.ndarray  #: predicted pseudorange without the receiver clock [m]
     rate: np.ndarray  #: predicted range rate without receiver velocity and drift [m/s]
@@ -217,7 +218,9 @@ def epoch_model(rows, r_rx, lat: float, lon: float, h: float, t: float,
     sv = np.column_stack([np.asarray(rows[c], float) for c in ("sat_vx", "sat_vy", "sat_vz")])
     rho, los, el, az, _, v_rot = geometry(np.asarray(r_rx, float), sp, sv, lat, lon)
     if atmosphere:
-        tr = tropo_delay(el, lat, h, doy if doy is not None else day_of_year(t))
+        doy = doy if doy is not None else day_of_year(t)
+        tr = tropo_delay(el, lat, h, doy)
+        tr_dh = tropo_delay(el, lat, h + 1.0, doy) - tr
         if iono_params is not None and config.iono == "klobuchar":
             io = klobuchar_delay(lat, lon, el, az, np.mod(t, 604800.0), iono_params[0],
                                  iono_params[1], np.asarray(rows["freq"], float))
@@ -227,7 +230,7 @@ def epoch_model(rows, r_rx, lat: float, lon: float, h: float, t: float,
             vio = np.full(rho.size, 25.0)
         vtr = tropo_variance(el)
     else:
-        tr = io = np.zeros(rho.size)
+        tr = io = tr_dh = np.zeros(rho.size)
         vio = vtr = np.zeros(rho.size)
     clk = np.asarray(rows["sat_clock"], float)
     pr = rho - C_LIGHT * clk + tr + io
@@ -237,7 +240,7 @@ def epoch_model(rows, r_rx, lat: float, lon: float, h: float, t: float,
     var_pr = pseudorange_variance(el, cn0, config) + np.where(np.isfinite(ura), ura, 10.0) ** 2 \
         + vio + vtr
     var_rate = range_rate_variance(el, cn0, config)
-    return EpochModel(rho, los, el, az, tr, io, pr, rate, v_rot, var_pr, var_rate)
+    return EpochModel(rho, los, el, az, tr, tr_dh, io, pr, rate, v_rot, var_pr, var_rate)
 
 
 def epoch_arrays(prepared: pd.DataFrame) -> tuple[np.ndarray, dict]:
