@@ -22,8 +22,9 @@ one clock drift ``d`` [m/s] (one oscillator); the same FDE.
 Output: a GNSS table in the layout of the other GNSS readers (``lat lon height`` [rad, m
 ellipsoidal], ``east_std north_std up_std``, ``vel_e vel_n vel_u`` + ``vel_*_std`` from the
 a-priori-weighted covariance, ``q = 5`` single, ``ns``), plus ``clock_bias_<S>`` [m],
-``clock_drift`` [m/s], ``gdop pdop hdop vdop``, ``chi2 dof raim_ok n_excluded``, and a residual
-table (one row per epoch and satellite).
+``clock_drift`` [m/s], ``gdop pdop hdop vdop``, ``chi2 dof raim_ok n_excluded``, indexed by
+the GPS time of reception (receiver time tag ``receiver_time`` minus the clock offset of the
+first system, ``b / c``), and a residual table (one row per epoch and satellite, by tag).
 
 References
 ----------
@@ -278,7 +279,11 @@ def spp(obs: pd.DataFrame, eph: pd.DataFrame, ion: pd.DataFrame | None = None,
             continue
         x0 = (s["r"], {q: v for q, v in s["bias"].items() if np.isfinite(v)})
         P = s["P_enu"]
-        row = {"time": t, "lat": s["lat"], "lon": s["lon"], "height": s["height"],
+        # the solution is at the true reception time: tag minus the receiver clock offset
+        b_ref = next((s["bias"][q] for q in systems if np.isfinite(s["bias"].get(q, np.nan))),
+                     0.0)
+        row = {"time": t - b_ref / C_LIGHT, "receiver_time": t, "lat": s["lat"], "lon": s["lon"],
+               "height": s["height"],
                "east_std": np.sqrt(P[0, 0]), "north_std": np.sqrt(P[1, 1]),
                "up_std": np.sqrt(P[2, 2])}
         if s["vel"] is not None:
@@ -304,7 +309,7 @@ def spp(obs: pd.DataFrame, eph: pd.DataFrame, ion: pd.DataFrame | None = None,
     cols = ["lat", "lon", "height", "east_std", "north_std", "up_std", "vel_e", "vel_n", "vel_u",
             "vel_e_std", "vel_n_std", "vel_u_std", "q", "ns", "clock_drift",
             *[f"clock_bias_{q}" for q in systems], "gdop", "pdop", "hdop", "vdop", "chi2", "dof",
-            "raim_ok", "n_excluded"]
+            "raim_ok", "n_excluded", "receiver_time"]
     sol = pd.DataFrame(sol_rows, columns=["time", *cols]).set_index("time")
     res = pd.DataFrame({c: np.concatenate([p[c] for p in res_parts]) if res_parts else []
                         for c in RESIDUAL_COLUMNS})
