@@ -1,9 +1,10 @@
 """u-blox UBX reader: raw observations (UBX-RXM-RAWX), broadcast navigation words
 (UBX-RXM-SFRBX) and the receiver's own fix (UBX-NAV-PVT).
 
-``pyubx2`` frames the stream (sync, length, checksum; interleaved NMEA/RTCM skipped) with
-``parsing=0``; the three payloads are decoded here with fixed numpy layouts, which is ~200x
-faster than pyubx2's per-field parsing (0.02 s instead of 5 s for the 1.5 MB walk stream).
+``pyubx2`` frames the stream (sync, length; interleaved NMEA/RTCM skipped) with ``parsing=0``
+(the checksum is verified here: pyubx2 checks it only when parsing); the three payloads are
+decoded with fixed numpy layouts, ~10x faster than pyubx2's per-field parsing (0.4 s instead
+of 5 s for the 1.5 MB walk stream).
 Payload layouts: u-blox "Interface Description" (F9/X20 HPG), UBX-RXM-RAWX, UBX-RXM-SFRBX,
 UBX-NAV-PVT.
 
@@ -89,6 +90,9 @@ def read_ubx(path) -> UbxData:
         for k, (raw, _) in enumerate(reader):
             if raw is None or len(raw) < 8:
                 continue
+            if not _checksum_ok(raw):
+                bad.append(f"message {k + 1}: checksum error")
+                continue
             cls_id = raw[2:4]
             payload = raw[6:-2]
             if cls_id == b"\x02\x15":  # RXM-RAWX
@@ -103,7 +107,7 @@ def read_ubx(path) -> UbxData:
     if not epochs:
         raise InputFormatError("no UBX-RXM-RAWX epoch in the stream", file=path,
                                expected="RXM-RAWX messages", found="none")
-    obs = pd.concat(obs_parts) if obs_parts else pd.DataFrame(columns=OBS_COLUMNS)
+    obs = _observation_table(obs_parts)
     ep = pd.DataFrame(epochs, columns=["time", "n_meas", "leap_seconds", "clock_reset"]
                       ).set_index("time")
     sf = pd.DataFrame(subframes, columns=["time", *SUBFRAME_COLUMNS]).set_index("time")
@@ -115,6 +119,13 @@ def read_ubx(path) -> UbxData:
             df.attrs["gps_week"] = int(ep.index[0] // WEEK_SECONDS)
         df.attrs["bad_messages"] = len(bad)
     return UbxData(obs, sf, pvt, ep)
+
+
+def _checksum_ok(raw: bytes) -> bool:
+    """UBX 8-bit Fletcher checksum over class, id, length and payload (pyubx2 validates it
+    only when it parses)."""
+    a = np.cumsum(np.frombuffer(raw, np.uint8, len(raw) - 4, 2), dtype=np.int64)
+    return (int(a[-1]) & 0xFF) == raw[-2] and (int(a.sum()) & 0xFF) == raw[-1]
 
 
 def _decode_rawx(payload: bytes, k: int, path, obs_parts: list, epochs: list) -> float:
@@ -131,20 +142,30 @@ def _decode_rawx(payload: bytes, k: int, path, obs_parts: list, epochs: list) ->
                                expected=f"{16 + 32 * n} bytes", found=len(payload))
     t = week * WEEK_SECONDS + float(tow)
     epochs.append((t, n, leap, bool(rec_stat & 2)))
-    if n == 0:
-        return t
-    m = np.frombuffer(payload, _RAWX_MEAS, n, 16)
-    systems = [UBX_SYSTEMS.get(int(g), "?") for g in m["gnss"]]
-    signals = [UBX_SIGNALS.get((int(g), int(s)), "") for g, s in zip(m["gnss"], m["sig"],
-                                                                      strict=True)]
+    if n:
+        obs_parts.append((t, np.frombuffer(payload, _RAWX_MEAS, n, 16)))
+    return t
+
+
+def _observation_table(parts: list) -> pd.DataFrame:
+    """One DataFrame from the (time, RAWX measurement records) of all epochs."""
+    if not parts:
+        return pd.DataFrame(columns=OBS_COLUMNS, index=pd.Index([], name="time", dtype=float))
+    m = np.concatenate([p[1] for p in parts])
+    t = np.repeat([p[0] for p in parts], [p[1].size for p in parts])
+    key = m["gnss"].astype(np.int64) * 256 + m["sig"]
+    sys_of = {g: s for g, s in UBX_SYSTEMS.items()}
+    systems = np.array([sys_of.get(int(g), "?") for g in m["gnss"]], object)
+    sig_of = {g * 256 + s: c for (g, s), c in UBX_SIGNALS.items()}
+    signals = np.array([sig_of.get(int(k), "") for k in key], object)
     k_glo = np.where(m["gnss"] == 6, m["freq_id"].astype(float) - 7.0, np.nan)
     prn = m["sv"].astype(int)
+    freq = np.array([carrier_frequency(s, g, kk) for s, g, kk in zip(systems, signals, k_glo,
+                                                                     strict=True)])
     trk = m["trk"]
     df = pd.DataFrame({
         "sat": [satellite_name(s, int(p)) for s, p in zip(systems, prn, strict=True)],
-        "system": systems, "prn": prn, "signal": signals,
-        "freq": [carrier_frequency(s, g, kk) for s, g, kk in zip(systems, signals, k_glo,
-                                                                  strict=True)],
+        "system": systems, "prn": prn, "signal": signals, "freq": freq,
         "pr": m["pr"], "cp": m["cp"], "doppler": m["doppler"].astype(float),
         "cn0": m["cno"].astype(float),
         "pr_std": 0.01 * 2.0 ** (m["pr_dev"] & 0x0F),
@@ -153,10 +174,8 @@ def _decode_rawx(payload: bytes, k: int, path, obs_parts: list, epochs: list) ->
         "lock_time": m["lock"] * 1e-3,
         "pr_valid": (trk & 1) > 0, "cp_valid": (trk & 2) > 0, "half_cycle": (trk & 4) > 0,
         "glonass_k": k_glo,
-    }, index=pd.Index(np.full(n, t), name="time"))
-    df = df[(df["system"] != "?") & (df["signal"] != "")]
-    obs_parts.append(df)
-    return t
+    }, index=pd.Index(t, name="time"))
+    return df[(systems != "?") & (signals != "")]
 
 
 def _decode_sfrbx(payload: bytes, last_time: float, out: list) -> None:
