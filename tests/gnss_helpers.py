@@ -9,7 +9,23 @@ import pandas as pd
 
 from insgnss.gnss.constants import BDT_MINUS_GPST
 from insgnss.gnss.navmsg import EPH_COLUMNS
+from insgnss.gnss.observations import GnssModelConfig, iono_variance, pseudorange_variance, tropo_variance
 from insgnss.io.gpstime import datetime64_from_gps_seconds
+
+#: a time in the walk's GPS week, and broadcast Klobuchar coefficients of that day
+T0 = 2381 * 604800.0 + 408600.0
+ALPHA = (2.142e-8, 2.235e-8, -1.192e-7, -1.192e-7)
+BETA = (129024.0, 65536.0, -196608.0, 327680.0)
+ION = pd.DataFrame([dict(system="G", source="lnav", **{f"alpha{k}": ALPHA[k] for k in range(4)},
+                         **{f"beta{k}": BETA[k] for k in range(4)})], index=[T0])
+#: the measurement model of the simulations (no C/N0 mask)
+CFG = GnssModelConfig(cn0_mask=0.0)
+
+
+def pr_noise(el, cn0, ura, iono):
+    """Pseudorange sigma the model assumes (receiver, URA, ionosphere and troposphere terms)."""
+    return np.sqrt(pseudorange_variance(el, cn0, CFG) + ura**2 + iono_variance(iono)
+                   + tropo_variance(el))
 
 
 def _d(v: float) -> str:

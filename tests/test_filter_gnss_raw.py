@@ -6,9 +6,8 @@ NEES consistent)."""
 from __future__ import annotations
 
 import numpy as np
-import pandas as pd
 import pytest
-from gnss_helpers import simulate_observations, synthetic_constellation
+from gnss_helpers import ALPHA, BETA, CFG, ION, T0, pr_noise, simulate_observations, synthetic_constellation
 from scipy.linalg import expm
 
 from insgnss.earth import (
@@ -22,22 +21,12 @@ from insgnss.earth import (
 from insgnss.filter.gnss_raw import Doppler, Pseudorange, ReceiverClock
 from insgnss.filter.measurements import NominalState
 from insgnss.filter.models import StateLayout
-from insgnss.gnss import GnssModelConfig, SppConfig, prepare_observations, spp
-from insgnss.gnss.observations import iono_variance, pseudorange_variance, range_rate_variance, tropo_variance
+from insgnss.gnss import SppConfig, prepare_observations, spp
+from insgnss.gnss.observations import range_rate_variance
 
-T0 = 2381 * 604800.0 + 408600.0
-ALPHA = (2.142e-8, 2.235e-8, -1.192e-7, -1.192e-7)
-BETA = (129024.0, 65536.0, -196608.0, 327680.0)
-ION = pd.DataFrame([dict(system="G", source="lnav", **{f"alpha{k}": ALPHA[k] for k in range(4)},
-                         **{f"beta{k}": BETA[k] for k in range(4)})], index=[T0])
 LAT0, LON0, H0 = np.radians(40.1), np.radians(-105.15), 1600.0
 R0 = np.array(geodetic_to_ecef(LAT0, LON0, H0))
-CFG = GnssModelConfig(cn0_mask=0.0)
 
-
-def _noise(el, cn0, ura, io):
-    return np.sqrt(pseudorange_variance(el, cn0, CFG) + ura**2 + iono_variance(io)
-                   + tropo_variance(el))
 
 
 def make_nav(layout, lat, lon, h, vel, C, omega, params) -> NominalState:
@@ -241,7 +230,7 @@ def test_simulated_tight_filter_is_consistent():
     times = T0 + 1.0 + np.arange(100) * 1.0
     obs, truth = simulate_observations(
         eph, times, lambda t: R0 + v_ecef * (t - T0), clock_fn,
-        isb={"E": 12.5}, iono=(ALPHA, BETA), noise=_noise, rng=rng,
+        isb={"E": 12.5}, iono=(ALPHA, BETA), noise=pr_noise, rng=rng,
         doppler_noise=lambda el, cn0: np.sqrt(range_rate_variance(el, cn0, CFG)))
     prep = prepare_observations(obs, eph, CFG)
     s0 = spp(obs[obs.index == obs.index[0]], eph, ION, SppConfig(model=CFG)).solution.iloc[0]

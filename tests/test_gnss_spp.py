@@ -4,10 +4,20 @@ inter-system bias recovery, fault exclusion, Doppler velocity), and the real wal
 from __future__ import annotations
 
 import numpy as np
-import pandas as pd
 import pytest
 from conftest import shared_data
-from gnss_helpers import simulate_observations, synthetic_constellation, write_rinex_nav, write_rinex_obs
+from gnss_helpers import (
+    ALPHA,
+    BETA,
+    CFG,
+    ION,
+    T0,
+    pr_noise,
+    simulate_observations,
+    synthetic_constellation,
+    write_rinex_nav,
+    write_rinex_obs,
+)
 
 from insgnss.earth import ecef_to_enu_matrix, ecef_to_geodetic, geodetic_to_ecef, geodetic_to_enu
 from insgnss.gnss import (
@@ -19,24 +29,13 @@ from insgnss.gnss import (
     read_ubx,
     spp,
 )
-from insgnss.gnss.observations import iono_variance, pseudorange_variance, tropo_variance
 
-T0 = 2381 * 604800.0 + 408600.0
-ALPHA = (2.142e-8, 2.235e-8, -1.192e-7, -1.192e-7)
-BETA = (129024.0, 65536.0, -196608.0, 327680.0)
-ION = pd.DataFrame([dict(system="G", source="lnav", **{f"alpha{k}": ALPHA[k] for k in range(4)},
-                         **{f"beta{k}": BETA[k] for k in range(4)})], index=[T0])
 R0 = np.array(geodetic_to_ecef(np.radians(40.1), np.radians(-105.15), 1600.0))
 V0 = np.array([3.0, -2.0, 0.5])  # ECEF velocity [m/s]
-CFG = GnssModelConfig(cn0_mask=0.0)
 
 
-def _noise(el, cn0, ura, io):
-    return np.sqrt(pseudorange_variance(el, cn0, CFG) + ura**2 + iono_variance(io)
-                   + tropo_variance(el))
 
-
-def _sim(n_epochs=150, noise=_noise, seed=1):
+def _sim(n_epochs=150, noise=pr_noise, seed=1):
     eph = synthetic_constellation(T0)
     times = T0 + 5.0 + np.arange(n_epochs) * 2.0
     obs, truth = simulate_observations(
