@@ -4,6 +4,7 @@ cases and synthetic constellations; no data files)."""
 from __future__ import annotations
 
 import numpy as np
+import pandas as pd
 import pytest
 from gnss_helpers import synthetic_constellation
 
@@ -55,6 +56,12 @@ def test_sisa_index():
 
 def test_orbit_velocity_and_clock_rate_are_derivatives():
     eph = synthetic_constellation(T0)
+    # a BeiDou GEO (C01: rotated-frame orbit) and a CNAV-style set (A_dot, delta_n_dot)
+    geo = eph.iloc[[0]].assign(sat="C01", system="C", prn=1, source="d1", sqrt_a=6493.4,
+                               i0=np.radians(1.0), toe_sow=eph["toe_sow"].iloc[0] - 14.0)
+    cnav = eph.iloc[[1]].assign(sat="G30", prn=30, source="cnav", a_dot=0.01,
+                                delta_n_dot=1e-14)
+    eph = pd.concat([eph, geo, cnav], ignore_index=True)
     rows = np.arange(len(eph))
     t = T0 + 1234.0
     s = satellite_states(eph, rows, t)
@@ -63,7 +70,8 @@ def test_orbit_velocity_and_clock_rate_are_derivatives():
     assert np.abs((a["pos"] - b["pos"]) / (2 * h) - s["vel"]).max() < 1e-4
     assert np.abs((a["clock"] - b["clock"]) / (2 * h) - s["clock_rate"]).max() < 1e-15
     r = np.linalg.norm(s["pos"], axis=1)
-    assert np.all((r > 2.55e7) & (r < 3.1e7))
+    assert np.all((r[:-2] > 2.55e7) & (r[:-2] < 3.1e7))
+    assert 4.1e7 < r[-2] < 4.3e7  # the GEO
 
 
 def test_keplerian_radius_period_and_relativity():

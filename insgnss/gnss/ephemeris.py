@@ -182,7 +182,7 @@ def satellite_states(eph: pd.DataFrame, rows, t) -> dict:
     r = A * den + d["crs"] * s2 + d["crc"] * c2
     inc = d["i0"] + d["idot"] * tk + d["cis"] * s2 + d["cic"] * c2
     # time derivatives
-    E_dot = nn / den
+    E_dot = (n0 + d["delta_n"] + d["delta_n_dot"] * tk) / den  # dM/dt
     nu_dot = E_dot * np.sqrt(1.0 - e * e) / den
     u_dot = nu_dot * (1.0 + 2.0 * (d["cus"] * c2 - d["cuc"] * s2))
     r_dot = A * e * sE * E_dot + d["a_dot"] * den + 2.0 * (d["crs"] * c2 - d["crc"] * s2) * nu_dot
