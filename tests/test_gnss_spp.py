@@ -4,6 +4,7 @@ inter-system bias recovery, fault exclusion, Doppler velocity), and the real wal
 from __future__ import annotations
 
 import numpy as np
+import pandas as pd
 import pytest
 from conftest import shared_data
 from gnss_helpers import (
@@ -224,3 +225,28 @@ def test_walk_rinex_round_trip_gives_the_same_spp(walk, tmp_path):
     # coefficients in the header)
     err = _enu_error(b, a)
     assert np.abs(err[:, :2]).max() < 0.01 and np.abs(err[:, 2]).max() < 0.05
+
+
+def test_keep_highest_satellites_inside_windows(sim):
+    from insgnss.gnss import prepare_observations
+    from insgnss.gnss.observations import keep_highest_satellites
+
+    eph, obs, truth = sim
+    prep = prepare_observations(obs, eph, CFG)
+    sol = spp(obs, eph, ION, SppConfig(model=CFG), prepared=prep).solution
+    t = np.asarray(prep.index, float)
+    win = [(t[0] + 20.0, t[0] + 40.0)]
+    thin = keep_highest_satellites(prep, win, 3, sol)
+    ti = np.asarray(thin.index, float)
+    inside = (ti >= win[0][0]) & (ti < win[0][1])
+    counts = pd.Series(1, index=ti[inside]).groupby(level=0).size()
+    assert (counts == 3).all() and len(counts) == 10
+    assert (~inside).sum() == ((t < win[0][0]) | (t >= win[0][1])).sum()
+    # the three kept are the three highest of the residual table at that epoch
+    r = spp(obs, eph, ION, SppConfig(model=CFG), prepared=prep).residuals
+    t1 = counts.index[0]
+    top = r[r["time"] == t1].nlargest(3, "el")["sat"]
+    assert set(thin.loc[thin.index == t1, "sat"]) == set(top)
+    assert thin.attrs["thinned_rows"] == len(prep) - len(thin)
+    # SPP is impossible with 3 satellites of 2 systems (5 unknowns): a loose filter loses the fix
+    assert len(spp(obs, eph, ION, SppConfig(model=CFG), prepared=thin).solution) == len(sol) - 10

@@ -33,6 +33,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import pandas as pd
 
+from ..earth import geodetic_to_ecef
 from ..errors import InputFormatError
 from .constants import C_LIGHT
 from .corrections import day_of_year, geometry, iono_variance, klobuchar_delay, tropo_delay, tropo_variance
@@ -268,3 +269,56 @@ def range_rate_variance(el, cn0, config: GnssModelConfig) -> np.ndarray:
     """Variance of a Doppler range rate [m^2/s^2] (elevation and C/N0 terms)."""
     return _el_cn0_variance(el, cn0, config.doppler_a, config.doppler_b, config.doppler_c,
                             config.cn0_ref)
+
+
+def keep_highest_satellites(prepared: pd.DataFrame, windows, n: int,
+                            positions: pd.DataFrame) -> pd.DataFrame:
+    """Inside the time ``windows`` keep only the ``n`` highest satellites of each epoch (the
+    partial-outage experiment of issue 19: a tight filter sees a few satellites where a loose
+    one has no fix).
+
+    Parameters
+    ----------
+    prepared : DataFrame
+        :func:`prepare_observations` output.
+    windows : sequence of (start, end)
+        Times in the prepared table's time base; rows with ``start <= t < end`` are thinned.
+    n : int
+        Satellites kept per epoch inside the windows (highest elevation first).
+    positions : DataFrame
+        Receiver ``lat lon height`` [rad, m] by time (e.g. the SPP solution), used at the
+        nearest time for the elevations.
+
+    Returns
+    -------
+    DataFrame
+        The rows kept; ``attrs["thinned_rows"]`` counts the rows removed.
+    """
+    if n < 0:
+        raise ValueError("n must be >= 0")
+    times = np.asarray(prepared.index, float)
+    inside = np.zeros(times.size, bool)
+    for a, b in windows:
+        inside |= (times >= a) & (times < b)
+    keep = np.ones(times.size, bool)
+    if inside.any():
+        if positions.empty:
+            raise InputFormatError("no receiver positions to rank the satellites by elevation")
+        pt = np.asarray(positions.index, float)
+        starts, arr = epoch_arrays(prepared)
+        for k in range(starts.size - 1):
+            i0, i1 = starts[k], starts[k + 1]
+            if not inside[i0]:
+                continue
+            j = int(np.argmin(np.abs(pt - times[i0])))
+            lat, lon, h = (float(positions[c].iloc[j]) for c in ("lat", "lon", "height"))
+            r = np.array(geodetic_to_ecef(lat, lon, h))
+            sp = np.column_stack([arr[c][i0:i1] for c in ("sat_x", "sat_y", "sat_z")])
+            el = geometry(r, sp, np.zeros_like(sp), lat, lon)[2]
+            order = np.argsort(-el)
+            keep[i0:i1] = False
+            keep[i0 + order[:n]] = True
+    out = prepared[keep]
+    out.attrs.update(prepared.attrs)
+    out.attrs["thinned_rows"] = int((~keep).sum())
+    return out
