@@ -87,8 +87,21 @@ def read_ubx(path) -> UbxData:
     with open(path, "rb") as f:
         reader = UBXReader(f, protfilter=2, quitonerror=1, parsing=0, validate=1,
                            errorhandler=lambda e: bad.append(str(e)))
-        for k, (raw, _) in enumerate(reader):
-            if raw is None or len(raw) < 8:
+        k = -1
+        while True:
+            pos = f.tell()
+            try:
+                raw, _ = reader.read()
+            except (UnicodeDecodeError, ValueError, IndexError, KeyError) as exc:
+                # pyubx2 lets the decoding errors of damaged NMEA lines escape; skip them
+                bad.append(f"byte {pos}: {exc}")
+                if f.tell() <= pos:
+                    f.seek(pos + 1)
+                continue
+            if raw is None:
+                break
+            k += 1
+            if len(raw) < 8:
                 continue
             if not _checksum_ok(raw):
                 bad.append(f"message {k + 1}: checksum error")
