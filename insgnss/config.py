@@ -45,7 +45,8 @@ SCHEMA: dict[str, Any] = {
             "columns": _spec(dict, None, "slot -> column name or index (csv)"),
             "gyro_unit": _spec(str, "rad/s"),
             "accel_unit": _spec(str, "m/s^2"),
-            "time_unit": _spec(str, "s"),
+            "time_unit": _spec(str, "s", "s, ms, us, ns, or sample (a sample index at the "
+                               "declared rate_hz)", choices=["s", "ms", "us", "ns", "sample"]),
             "time_offset": _spec(_NUM, 0.0, "added to the IMU time [s]"),
             "estimate_time_offset": _spec(bool, False, "estimate a further IMU-GNSS offset from "
                                           "gyro yaw rate vs GNSS course rate (land vehicles)"),
@@ -56,6 +57,8 @@ SCHEMA: dict[str, Any] = {
             "rate_hz": _spec(_NUM, None, "declared IMU rate (checked)"),
             "delimiter": _spec(str, ","),
             "header": _spec(bool, True),
+            "header_rows": _spec(int, 1, "header lines (csv); with more than one a column is "
+                                 "named by its levels joined with '_'"),
             "gap_policy": _spec(str, "error", "gaps longer than max_gap: stop the run, bridge "
                                 "them, or process the segments separately (docs/jobs.md, "
                                 "Robustness)", choices=["error", "bridge", "split"]),
@@ -236,7 +239,8 @@ def _type_name(kind) -> str:
         return "number"
     if isinstance(kind, tuple):
         return " or ".join(k.__name__ for k in kind)
-    return {str: "string", bool: "boolean", list: "array", dict: "table"}.get(kind, str(kind))
+    return {str: "string", bool: "boolean", int: "integer", list: "array",
+            dict: "table"}.get(kind, str(kind))
 
 
 def _check_value(value, spec, key: str, file) -> Any:

@@ -8,7 +8,16 @@ axes, in the declared units:
 - gyro: ``rad/s`` or ``deg/s`` (rates), ``rad`` or ``deg`` (angle increments);
 - accelerometer: ``m/s^2`` or ``g`` (rates, 1 g = 9.80665 m/s^2 unless declared otherwise),
   ``m/s`` (velocity increments);
-- time: ``s``, ``ms``, ``us`` or ``ns``; ``t = time_value * unit + time_offset`` [s].
+- time: ``s``, ``ms``, ``us`` or ``ns``; ``t = time_value * unit + time_offset`` [s]; or
+  ``sample``: the time column is a sample index ``k`` (integers, e.g. gaitmap's or an index
+  column written by pandas) and ``t = k / rate_hz + time_offset`` with the declared rate.
+
+Header: ``header_rows`` lines (after comment lines) name the columns. With more than one
+(pandas ``MultiIndex`` columns, spreadsheet exports with merged group cells) the name of a
+column is its non-empty level cells joined with ``"_"`` (``left_sensor`` over ``acc_x`` gives
+``left_sensor_acc_x``); an empty cell of an upper level continues the group to its left (a
+merged cell), the last level is never filled. A column may also be declared by its levels
+(a list ``["left_sensor", "acc_x"]``) or by its 0-based index.
 
 Rates and increments cannot be mixed; the output is an insgnss IMU table
 (:mod:`insgnss.imu`): ``gyro_* accel_*`` (rad/s, m/s^2) or ``dtheta_* dv_*`` (rad, m/s), in the
@@ -45,6 +54,7 @@ from ..errors import ConfigError, InputFormatError
 from ..imu import ACCEL_COLS, DEG, DTHETA_COLS, DV_COLS, G0, GYRO_COLS
 from ..validate import (
     GapPolicy,
+    TextRows,
     apply_gap_policy,
     check_finite,
     check_imu_units,
@@ -62,8 +72,10 @@ from ..validate import (
 GYRO_UNITS = {"rad/s": (1.0, False), "deg/s": (DEG, False), "rad": (1.0, True), "deg": (DEG, True)}
 #: accelerometer units: name -> (scale to m/s^2 or m/s in units of g if None, is_increment)
 ACCEL_UNITS = {"m/s^2": (1.0, False), "m/s2": (1.0, False), "g": (None, False), "m/s": (1.0, True)}
-#: time units -> seconds
-TIME_UNITS = {"s": 1.0, "ms": 1e-3, "us": 1e-6, "ns": 1e-9}
+#: time units -> seconds (``"sample"``: a sample index, divided by the declared rate)
+TIME_UNITS = {"s": 1.0, "ms": 1e-3, "us": 1e-6, "ns": 1e-9, "sample": None}
+#: separator of the level names of a multi-row header
+HEADER_JOIN = "_"
 
 #: sensor slots of the column mapping
 SLOTS = ("time", "gyro_x", "gyro_y", "gyro_z", "accel_x", "accel_y", "accel_z")
@@ -242,9 +254,35 @@ def imu_table_from_arrays(
                         mounting=M.tolist(), units={"gyro": gyro_unit, "accel": accel_unit})
 
 
+def _header_cells(line: str, delimiter: str | None) -> list[str]:
+    return [h.strip().strip('"').strip("'").strip() for h in line.split(delimiter)]
+
+
+def header_names(lines: Sequence[str], delimiter: str | None = ","
+                 ) -> tuple[list[str], list[tuple[str, ...]]]:
+    """Column names and level tuples of a header of one or more rows.
+
+    The name of a column is its non-empty cells, top level first, joined with
+    :data:`HEADER_JOIN`; an empty cell of an upper level continues the group to its left
+    (a merged spreadsheet cell). With one row the names are the cells.
+    """
+    rows = [_header_cells(line, delimiter) for line in lines]
+    width = max(len(r) for r in rows)
+    rows = [r + [""] * (width - len(r)) for r in rows]
+    for r in rows[:-1]:  # merged group cells: continue the group to the left
+        for j in range(1, width):
+            if not r[j] and rows[-1][j]:
+                r[j] = r[j - 1]
+    levels = [tuple(r[j] for r in rows) for j in range(width)]
+    names = [HEADER_JOIN.join(c for c in lv if c) for lv in levels]
+    return names, levels
+
+
 def _resolve_columns(columns: Mapping | None, header: list[str] | None, file, header_line,
-                     increments: bool) -> tuple[list[int], list[str]]:
-    """Field indices and display names of the 7 slots."""
+                     increments: bool, levels: list[tuple[str, ...]] | None = None
+                     ) -> tuple[list[int], list[str]]:
+    """Field indices and display names of the 7 slots (a slot names a column, its header
+    levels as a list, or a 0-based field index)."""
     if columns is None:
         if header is None:
             return list(range(7)), list(SLOTS)
@@ -272,19 +310,56 @@ def _resolve_columns(columns: Mapping | None, header: list[str] | None, file, he
                 raise ConfigError("column index must be >= 0", column=f"columns.{s}", found=repr(v))
             idx.append(int(v))
             names.append(header[v] if header is not None and v < len(header) else f"{s} (field {v + 1})")
+            continue
+        if isinstance(v, (list, tuple)) and v and all(isinstance(c, str) for c in v):
+            if levels is None or len(v) != len(levels[0]):
+                raise ConfigError("a column given by its header levels needs a header of as "
+                                  "many rows", column=f"columns.{s}",
+                                  expected=f"{0 if levels is None else len(levels[0])} level "
+                                  "names", found=repr(v))
+            hits = [j for j, lv in enumerate(levels) if lv == tuple(v)]
+            label = HEADER_JOIN.join(c for c in v if c)
         elif isinstance(v, str):
             if header is None:
                 raise ConfigError("column names need a header line; give 0-based indices",
                                   column=f"columns.{s}", found=repr(v))
-            if v not in header:
-                raise InputFormatError("missing column", file=file, row=header_line, column=v,
-                                       expected=f"a column named {v!r}", found=", ".join(header))
-            idx.append(header.index(v))
-            names.append(v)
+            hits = [j for j, h in enumerate(header) if h == v]
+            label = v
         else:
-            raise ConfigError("column must be a name or a 0-based index", column=f"columns.{s}",
-                              found=repr(v))
+            raise ConfigError("column must be a name, a list of header levels or a 0-based "
+                              "index", column=f"columns.{s}", found=repr(v))
+        if not hits:
+            raise InputFormatError("missing column", file=file, row=header_line, column=label,
+                                   expected=f"a column named {v!r}", found=", ".join(header))
+        if len(hits) > 1:
+            raise InputFormatError("column name is not unique", file=file, row=header_line,
+                                   column=label, expected="one column of that name",
+                                   found=f"fields {', '.join(str(j + 1) for j in hits)}")
+        idx.append(hits[0])
+        names.append(label)
     return idx, names
+
+
+def sample_index_time(k: np.ndarray, rate_hz, line_no: np.ndarray, file, column: str
+                      ) -> np.ndarray:
+    """Time [s] ``k / rate_hz`` of a sample-index column (``time_unit = "sample"``); the
+    index must be integral and the rate declared."""
+    try:
+        rate = float(rate_hz)
+    except (TypeError, ValueError):
+        rate = np.nan
+    if not (np.isfinite(rate) and rate > 0):
+        raise ConfigError('time_unit = "sample" needs the declared sample rate',
+                          column="rate_hz", expected="a positive number of Hz",
+                          found=repr(rate_hz))
+    bad = np.flatnonzero(np.abs(k - np.round(k)) > 1e-9 * np.maximum(1.0, np.abs(k)))
+    if bad.size:
+        i = bad[0]
+        raise InputFormatError("sample index is not an integer", file=file,
+                               row=int(line_no[i]), column=column,
+                               expected='an integer sample index (time_unit = "sample")',
+                               found=repr(float(k[i])))
+    return np.round(k) / rate
 
 
 def read_imu_csv(
@@ -301,6 +376,7 @@ def read_imu_csv(
     euler_convention: str = "active",
     delimiter: str | None = ",",
     header: bool = True,
+    header_rows: int = 1,
     comment: str | tuple[str, ...] = "#",
     rate_hz: float | None = None,
     gap_policy: GapPolicy | None = None,
@@ -316,11 +392,13 @@ def read_imu_csv(
     path : path
     columns : mapping, optional
         Slot -> column: slots ``time gyro_x gyro_y gyro_z accel_x accel_y accel_z`` (aliases
-        ``dtheta_* dv_*``) map to header names, or to 0-based field indices. Default: the
+        ``dtheta_* dv_*``) map to header names (levels joined with ``"_"`` for a multi-row
+        header), to lists of header levels, or to 0-based field indices. Default: the
         header names equal the slots (``time gyro_x ...`` or ``time dtheta_x ... dv_z``), or,
         without a header, fields 0-6 in slot order. Other columns are ignored.
     gyro_unit, accel_unit, time_unit : str
-        Declared units (``GYRO_UNITS``, ``ACCEL_UNITS``, ``TIME_UNITS``).
+        Declared units (``GYRO_UNITS``, ``ACCEL_UNITS``, ``TIME_UNITS``); ``time_unit =
+        "sample"`` reads the time column as a sample index at ``rate_hz``.
     time_offset : float
         Added to the scaled time [s] (e.g. a logging delay).
     axis_map, mounting_euler_deg, sensor_axes, euler_convention
@@ -328,7 +406,9 @@ def read_imu_csv(
     delimiter : str or None
         Field separator (None: whitespace).
     header : bool
-        First non-comment line is a header.
+        The first non-comment lines are a header.
+    header_rows : int
+        Number of header lines (> 1: multi-level names, see the module docstring).
     comment : str or tuple of str
         Prefixes of comment lines (skipped; they still count for line numbers).
     rate_hz, gap_policy, duplicates, check_units, g, time_base
@@ -342,19 +422,34 @@ def read_imu_csv(
     if not np.isfinite(offset):
         raise ConfigError("time offset must be a finite number of seconds", column="time_offset",
                           found=repr(time_offset))
+    if isinstance(header_rows, bool) or not isinstance(header_rows, (int, np.integer)) \
+            or header_rows < 1:
+        raise ConfigError("header_rows must be a positive integer", column="header_rows",
+                          found=repr(header_rows))
     _, g_inc = _choice(gyro_unit, GYRO_UNITS, "gyro_unit")
     _choice(accel_unit, ACCEL_UNITS, "accel_unit")
     M = mounting_matrix(axis_map, mounting_euler_deg, sensor_axes=sensor_axes,
                         euler_convention=euler_convention)
     comment = (comment,) if isinstance(comment, str) else tuple(comment)
     rows = split_lines(read_text(path), path, comment=comment, header=header)
-    head = None
+    head = levels = None
     if header:
-        head = [h.strip().strip('"').strip("'").strip() for h in rows.header.split(delimiter)]
-    idx, names = _resolve_columns(columns, head, path, rows.header_line, g_inc)
+        extra = int(header_rows) - 1
+        if extra >= len(rows.lines):
+            raise InputFormatError("no data rows after the header", file=path,
+                                   row=rows.header_line, expected=f"{header_rows} header "
+                                   "lines and data rows", found=f"{len(rows.lines) + 1} lines")
+        head, levels = header_names([rows.header, *rows.lines[:extra]], delimiter)
+        if extra:
+            rows = TextRows(rows.file, rows.lines[extra:], rows.line_no[extra:], rows.header,
+                            rows.header_line, rows.comments)
+    idx, names = _resolve_columns(columns, head, path, rows.header_line, g_inc, levels)
     values = parse_numeric(rows, names, delimiter=delimiter, usecols=idx,
                            ncols=len(head) if head is not None else None)
-    t = values[:, 0] * tscale + offset
+    if tscale is None:
+        t = sample_index_time(values[:, 0], rate_hz, rows.line_no, path, names[0]) + offset
+    else:
+        t = values[:, 0] * tscale + offset
     return imu_table_from_arrays(
         t, values[:, 1:4], values[:, 4:7], gyro_unit=gyro_unit, accel_unit=accel_unit,
         mounting=M, file=path, line_no=rows.line_no, names=names, rate_hz=rate_hz,

@@ -96,7 +96,8 @@ def read_imu(job: Job) -> pd.DataFrame:
                         mounting_euler_deg=spec["mounting_deg"], sensor_axes=spec["sensor_axes"],
                         euler_convention=spec["mounting_convention"], rate_hz=spec["rate_hz"],
                         delimiter=spec["delimiter"], header=spec["header"],
-                        gap_policy=gap_policy(job), duplicates=spec["duplicates"])
+                        header_rows=spec["header_rows"], gap_policy=gap_policy(job),
+                        duplicates=spec["duplicates"])
 
 
 def read_gnss(job: Job) -> pd.DataFrame | None:
