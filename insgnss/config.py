@@ -182,7 +182,9 @@ SCHEMA: dict[str, Any] = {
                             choices=["gauss_markov", "random_walk", "random_constant"]),
         "scale_factors": _spec(bool, False),
         "smoother": _spec(bool, True),
-        "coning": _spec(bool, False),
+        "coning": _spec(bool, False, "two-sample coning/sculling correction of the increments "
+                        "(strapdown and foot; for integrated increments, not for the exact "
+                        "duals a simulation makes)"),
         "levelling_correlation": _spec(bool, False, "static initialization: correlate the "
                                        "levelled tilt with the accelerometer-bias states in P0 "
                                        "(FilterConfig.levelling_correlation; experimental)"),
