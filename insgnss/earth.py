@@ -247,3 +247,18 @@ def schuler_period(lat: float = np.pi / 4, h: float = 0.0) -> float:
     """Schuler period ``2 pi sqrt(R / g)`` [s] with the Gaussian mean radius ``sqrt(M N)``."""
     M, N = radii(float(lat))
     return float(2.0 * np.pi * np.sqrt((np.sqrt(M * N) + h) / normal_gravity(lat, h)))
+
+
+# --- standard atmosphere (barometric height) ------------------------------------------------
+#: ICAO standard atmosphere, troposphere: sea-level temperature [K], lapse rate [K/m],
+#: sea-level pressure [Pa], exponent R L / (g0 M)
+ISA_T0, ISA_LAPSE, ISA_P0, ISA_EXPONENT = 288.15, 0.0065, 101325.0, 0.190263
+#: plausible static pressures [Pa] (below sea level to about 11 km)
+PRESSURE_RANGE = (2.0e4, 1.1e5)
+
+
+def pressure_altitude(p) -> np.ndarray:
+    """ISA pressure altitude [m] of static pressure ``p`` [Pa]:
+    ``h = T0 / L (1 - (p / p0) ** 0.190263)`` (ICAO Doc 7488)."""
+    p = np.asarray(p, float)
+    return ISA_T0 / ISA_LAPSE * (1.0 - (p / ISA_P0) ** ISA_EXPONENT)

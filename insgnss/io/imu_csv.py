@@ -50,7 +50,8 @@ import numpy as np
 import pandas as pd
 
 from ..attitude import P_SWAP, euler_to_dcm
-from ..errors import ConfigError, InputFormatError
+from ..earth import PRESSURE_RANGE
+from ..errors import ConfigError, InputFormatError, InvalidValueError
 from ..imu import ACCEL_COLS, DEG, DTHETA_COLS, DV_COLS, G0, GYRO_COLS
 from ..validate import (
     GapPolicy,
@@ -79,6 +80,10 @@ HEADER_JOIN = "_"
 
 #: sensor slots of the column mapping
 SLOTS = ("time", "gyro_x", "gyro_y", "gyro_z", "accel_x", "accel_y", "accel_z")
+#: optional barometer slots, copied into the IMU table: static pressure [Pa] or barometric
+#: height [m] (for :mod:`insgnss.filter.height_aiding`)
+BARO_SLOTS = ("pressure", "baro_height")
+
 _ALIASES = {"dtheta_x": "gyro_x", "dtheta_y": "gyro_y", "dtheta_z": "gyro_z",
             "dv_x": "accel_x", "dv_y": "accel_y", "dv_z": "accel_z"}
 
@@ -281,8 +286,8 @@ def header_names(lines: Sequence[str], delimiter: str | None = ","
 def _resolve_columns(columns: Mapping | None, header: list[str] | None, file, header_line,
                      increments: bool, levels: list[tuple[str, ...]] | None = None
                      ) -> tuple[list[int], list[str]]:
-    """Field indices and display names of the 7 slots (a slot names a column, its header
-    levels as a list, or a 0-based field index)."""
+    """Field indices and display names of the 7 slots and an optional barometer slot (a slot
+    names a column, its header levels as a list, or a 0-based field index)."""
     if columns is None:
         if header is None:
             return list(range(7)), list(SLOTS)
@@ -294,16 +299,20 @@ def _resolve_columns(columns: Mapping | None, header: list[str] | None, file, he
     mapping = {}
     for k, v in columns.items():
         slot = _ALIASES.get(k, k)
-        if slot not in SLOTS:
+        if slot not in SLOTS + BARO_SLOTS:
             raise ConfigError("unknown column slot", column=f"columns.{k}",
-                              expected="one of " + ", ".join(SLOTS), found=repr(k))
+                              expected="one of " + ", ".join(SLOTS + BARO_SLOTS),
+                              found=repr(k))
         mapping[slot] = v
+    if all(b in mapping for b in BARO_SLOTS):
+        raise ConfigError("give one barometer column", column="columns",
+                          expected="pressure or baro_height", found="both")
     missing = [s for s in SLOTS if s not in mapping]
     if missing:
         raise ConfigError("column mapping incomplete", column="columns",
                           expected="all of " + ", ".join(SLOTS), found="missing " + ", ".join(missing))
     idx, names = [], []
-    for s in SLOTS:
+    for s in SLOTS + tuple(b for b in BARO_SLOTS if b in mapping):
         v = mapping[s]
         if isinstance(v, (int, np.integer)) and not isinstance(v, bool):
             if v < 0:
@@ -395,7 +404,9 @@ def read_imu_csv(
         ``dtheta_* dv_*``) map to header names (levels joined with ``"_"`` for a multi-row
         header), to lists of header levels, or to 0-based field indices. Default: the
         header names equal the slots (``time gyro_x ...`` or ``time dtheta_x ... dv_z``), or,
-        without a header, fields 0-6 in slot order. Other columns are ignored.
+        without a header, fields 0-6 in slot order. Other columns are ignored. An optional
+        slot ``pressure`` [Pa] or ``baro_height`` [m] copies a barometer column into the
+        table under that name (checked: finite, pressure 20-110 kPa).
     gyro_unit, accel_unit, time_unit : str
         Declared units (``GYRO_UNITS``, ``ACCEL_UNITS``, ``TIME_UNITS``); ``time_unit =
         "sample"`` reads the time column as a sample index at ``rate_hz``.
@@ -450,8 +461,29 @@ def read_imu_csv(
         t = sample_index_time(values[:, 0], rate_hz, rows.line_no, path, names[0]) + offset
     else:
         t = values[:, 0] * tscale + offset
-    return imu_table_from_arrays(
+    df = imu_table_from_arrays(
         t, values[:, 1:4], values[:, 4:7], gyro_unit=gyro_unit, accel_unit=accel_unit,
-        mounting=M, file=path, line_no=rows.line_no, names=names, rate_hz=rate_hz,
+        mounting=M, file=path, line_no=rows.line_no, names=names[:7], rate_hz=rate_hz,
         gap_policy=gap_policy, duplicates=duplicates, check_units=check_units, g=g,
         time_base=time_base, fmt="imu-csv")
+    if len(names) > 7:
+        _attach_baro(df, values[:, 7], rows.line_no, path, names[7],
+                     next(b for b in BARO_SLOTS if b in (columns or {})))
+    return df
+
+
+def _attach_baro(df: pd.DataFrame, x: np.ndarray, line_no: np.ndarray, file, name: str,
+                 slot: str) -> None:
+    """Copy the barometer column into ``df`` (rows the reader kept), checking it."""
+    kept = np.searchsorted(line_no, df.attrs["source_rows"])
+    x = x[kept]
+    bad = ~np.isfinite(x)
+    if slot == "pressure":
+        bad |= (x < PRESSURE_RANGE[0]) | (x > PRESSURE_RANGE[1])
+    if bad.any():
+        i = int(np.flatnonzero(bad)[0])
+        raise InvalidValueError("implausible barometer value", file=file,
+                                row=int(df.attrs["source_rows"][i]), column=name,
+                                expected="pressure 20-110 kPa in Pa" if slot == "pressure"
+                                else "a finite height in m", found=repr(float(x[i])))
+    df[slot] = x
