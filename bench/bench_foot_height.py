@@ -1,0 +1,406 @@
+#!/usr/bin/env python3
+"""Foot-mounted INS: end height and horizontal accuracy on the held-out foot tracks, and the
+height error of each effect alone on a simulated level walk (docs/zupt.md, section 6).
+
+Default mode: runs the foot preset (``insgnss.foot.FootConfig()``, or a ``[foot]`` table from a
+TOML file) unchanged on
+
+- x-io Gait-Tracking short / long walk (``shared/data/foot-xio-gait``): loop closure, the
+  final horizontal displacement from the start [m]; level walk, so the end height error is the
+  final ``up`` [m];
+- UCR left / right foot (``shared/data/foot-ucr-zupt``): whole-track horizontal RMS after a 2-D
+  rigid fit of (north, east) to the truth (x, y) (the truth frame is z-down, the mirror image
+  of ENU; see its README); end height error against the truth's ``-z``;
+- the 28 PyShoe Vicon trials (``shared/data/pyshoe-vicon``): end height error against the
+  Vicon ``z`` (z up), and the 2-D ARMSE of the shared scorer.
+
+and prints one table (the smoothed solution; ``--forward`` for the causal filter), with the
+forward solution's raw path length beside its stance-to-stance distance
+(``insgnss.strides.stance_distance``).
+
+``--only sim``: the foot preset on a 100.8 m simulated level walk
+(:mod:`insgnss.simulate.gait`) with one effect at a time (intra-interval motion at 200/100/60
+Hz with and without the coning/sculling correction, ZUPT window timing, stance roll, clipping,
+scale factors, non-orthogonality, g-sensitivity, gravity, noise).
+``--only level_floor``: ZUPT at the preset's stances in the general engine without and with
+:class:`insgnss.filter.height_aiding.LevelFloor` on the real tracks.
+
+Usage::
+
+    PYTHONPATH=. python bench/bench_foot_height.py [--config job.toml] [--forward] [--json]
+                                                  [--only xio|ucr|pyshoe|sim|level_floor]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+import tomllib
+from pathlib import Path
+
+import numpy as np
+
+REPO = Path(__file__).resolve().parents[1]
+DATA = REPO.parent / "shared" / "data"
+sys.path.insert(0, str(REPO / "scenarios" / "pyshoe"))
+import convert  # noqa: E402  (PyShoe .mat reader)
+
+from insgnss.foot import FootConfig, run_foot_ins  # noqa: E402
+from insgnss.io import read_imu_csv  # noqa: E402
+from insgnss.strides import path_length, stance_distance  # noqa: E402
+from insgnss.validate import GapPolicy  # noqa: E402
+
+XIO_COLS = {"time": "Time (s)", "gyro_x": "Gyroscope X (deg/s)", "gyro_y": "Gyroscope Y (deg/s)",
+            "gyro_z": "Gyroscope Z (deg/s)", "accel_x": "Accelerometer X (g)",
+            "accel_y": "Accelerometer Y (g)", "accel_z": "Accelerometer Z (g)"}
+UCR_COLS = {"time": "time_index", "gyro_x": "gyro_x", "gyro_y": "gyro_y", "gyro_z": "gyro_z",
+            "accel_x": "acc_x", "accel_y": "acc_y", "accel_z": "acc_z"}
+UCR_RATE = 60.0
+#: approximate sites (normal gravity only; heading is unobservable anyway)
+SITES = {"xio": (np.radians(51.45), np.radians(-2.59), 20.0),     # Bristol
+         "ucr": (np.radians(33.97), np.radians(-117.33), 300.0),  # Riverside
+         "pyshoe": convert.TORONTO}
+
+
+def load_config(path: str | Path | None) -> FootConfig:
+    if path is None:
+        return FootConfig()
+    with open(path, "rb") as fh:
+        return FootConfig.from_dict(tomllib.load(fh).get("foot", {}))
+
+
+def rigid_fit_2d(a: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Rotation R and translation c minimising ``|R a + c - b|`` (2-D Kabsch)."""
+    ma, mb = a.mean(0), b.mean(0)
+    U, _, Vt = np.linalg.svd((a - ma).T @ (b - mb))
+    d = np.sign(np.linalg.det(Vt.T @ U.T))
+    R = Vt.T @ np.diag([1.0, d]) @ U.T
+    return R, mb - R @ ma
+
+
+def stance_length(res) -> float:
+    """Horizontal distance of the forward solution from stance to stance."""
+    return stance_distance(res.forward[["east", "north"]].to_numpy(),
+                           res.stillness.still.to_numpy(bool))
+
+
+def _common(res, sol) -> dict:
+    fwd = res.forward[["east", "north"]].to_numpy()
+    return {"up_end": float(sol["up"].iloc[-1]), "length_raw": path_length(fwd),
+            "length_stance": stance_length(res)}
+
+
+def run_xio(cfg: FootConfig, forward: bool) -> list[dict]:
+    out = []
+    for name in ("short_walk", "long_walk"):
+        imu = read_imu_csv(DATA / "foot-xio-gait" / f"{name}.csv", columns=XIO_COLS,
+                           gyro_unit="deg/s", accel_unit="g",
+                           gap_policy=GapPolicy(max_bridge=1.0, long="bridge"))
+        res = run_foot_ins(imu, cfg, lat=SITES["xio"][0], lon=SITES["xio"][1],
+                           height=SITES["xio"][2])
+        sol = res.forward if forward else res.trajectory
+        e, n = sol["east"].iloc[-1], sol["north"].iloc[-1]
+        out.append({"track": f"xio {name.split('_')[0]}", "metric": "loop closure",
+                    "horizontal": float(np.hypot(e, n)), "height_err": float(sol["up"].iloc[-1]),
+                    **_common(res, sol)})
+    return out
+
+
+def run_ucr(cfg: FootConfig, forward: bool) -> list[dict]:
+    import pandas as pd
+
+    gt = pd.read_csv(DATA / "foot-ucr-zupt" / "positionGt.csv")
+    out = []
+    for side, fname in (("left", "imuMeasLeft.csv"), ("right", "imuMeasRight.csv")):
+        imu = read_imu_csv(DATA / "foot-ucr-zupt" / fname, columns=UCR_COLS,
+                           time_unit="sample", rate_hz=UCR_RATE)
+        res = run_foot_ins(imu, cfg, lat=SITES["ucr"][0], lon=SITES["ucr"][1],
+                           height=SITES["ucr"][2])
+        sol = res.forward if forward else res.trajectory
+        truth = gt[[f"pos_{side}_x", f"pos_{side}_y", f"pos_{side}_z"]].to_numpy()
+        n = min(len(sol), len(truth))
+        a = sol[["north", "east"]].to_numpy()[:n]  # the truth is the NED mirror of ENU
+        b = truth[:n, :2]
+        R, c = rigid_fit_2d(a, b)
+        rms = float(np.sqrt(np.mean(np.sum((a @ R.T + c - b) ** 2, axis=1))))
+        up_true = -(truth[:n, 2] - truth[0, 2])
+        out.append({"track": f"ucr {side}", "metric": "RMS (fit)", "horizontal": rms,
+                    "height_err": float(sol["up"].iloc[n - 1] - up_true[-1]),
+                    **_common(res, sol)})
+    return out
+
+
+def run_pyshoe(cfg: FootConfig, forward: bool) -> list[dict]:
+    """End height against the Vicon z; 2-D ARMSE from the shared scorer
+    (``shared/eval/pyshoe_armse.py``, via ``scenarios/pyshoe/run_pyshoe.py``)."""
+    import tempfile
+
+    import run_pyshoe
+
+    from insgnss.io.native import atomic_write
+
+    out = []
+    lat, lon, h = SITES["pyshoe"]
+    with tempfile.TemporaryDirectory() as tmp:
+        for mat in sorted((DATA / "pyshoe-vicon").glob("*.mat")):
+            imu, truth = convert.to_insgnss(mat)
+            res = run_foot_ins(imu, cfg, lat=lat, lon=lon, height=h)
+            sol = res.forward if forward else res.trajectory
+            ned = run_pyshoe.solution_ned(sol)
+            atomic_write(Path(tmp) / f"{mat.stem}.csv",
+                         lambda p, s=ned: s.to_csv(p, index=False, float_format="%.6f"))
+            tz = truth["z"].to_numpy()
+            out.append({"track": f"pyshoe {mat.stem}", "metric": "ARMSE",
+                        "height_err": float(sol["up"].iloc[-1] - (tz[-1] - tz[0])),
+                        "truth_dz": float(tz[-1] - tz[0]), **_common(res, sol)})
+        scores = run_pyshoe.score(DATA / "pyshoe-vicon", Path(tmp))
+    for r in out:
+        r["horizontal"] = float(scores[r["track"].split()[1]]["ours"])
+    return out
+
+
+# --- simulation: each effect alone on a 100 m level walk -----------------------------------
+SIM_STEPS = 72  # x 1.4 m = 100.8 m
+
+
+def _sim(rate=200.0, oversample=20, **kw):
+    from insgnss.simulate.gait import GaitParams, simulate_walk
+
+    gait = {k: kw.pop(k) for k in list(kw) if k in GaitParams.__dataclass_fields__}
+    return simulate_walk([{"type": "stand", "duration": 2.0},
+                          {"type": "walk", "steps": SIM_STEPS, **gait},
+                          {"type": "stand", "duration": 2.0}], rate=rate,
+                         oversample=oversample, lat=np.radians(45.0), **kw)
+
+
+def _sim_error(w, imu, cfg, still="truth", lat_offset=0.0) -> tuple[float, float]:
+    """End height and horizontal error [m] of the foot INS on a simulated walk."""
+    from insgnss.earth import geodetic_to_enu
+
+    tr = w.truth
+    mask = (tr.stationary.to_numpy() > 0.5) if isinstance(still, str) and still == "truth" \
+        else still
+    res = run_foot_ins(imu, cfg, still=mask, lat=tr.lat.iloc[0] + lat_offset,
+                       lon=tr.lon.iloc[0], height=tr.height.iloc[0])
+    e, n, u = geodetic_to_enu(tr.lat.values, tr.lon.values, tr.height.values,
+                              tr.lat.iloc[0], tr.lon.iloc[0], tr.height.iloc[0])
+    sol = res.trajectory
+    return (float(sol.up.iloc[-1] - u[-1]),
+            float(np.hypot(sol.east.iloc[-1] - e[-1], sol.north.iloc[-1] - n[-1])))
+
+
+def _shift_mask(mask: np.ndarray, start: int, end: int) -> np.ndarray:
+    """Each walking stance extended (>0) or cut (<0) by ``start`` samples before its start
+    and ``end`` samples after its end (the first and last stand untouched)."""
+    from insgnss.strides import still_runs
+
+    out = mask.copy()
+    for a, b in still_runs(mask)[1:-1]:
+        if start > 0:
+            out[a - start:a] = True
+        elif start < 0:
+            out[a:a - start] = False
+        if end > 0:
+            out[b:b + end] = True
+        elif end < 0:
+            out[b + end:b] = False
+    return out
+
+
+def sim_effects(cfg: FootConfig) -> list[dict]:
+    """Height error after the 100 m walk for each effect alone (truth stance windows unless
+    stated; the detector runs with VN-100 noise)."""
+    from insgnss.imu import ImuErrorModel, coning_sculling, increments, increments_table
+    from insgnss.simulate.sensors import simulate_imu
+
+    rows = []
+
+    def add(name, w, imu, **kw):
+        dh, dxy = _sim_error(w, imu, cfg, **kw)
+        rows.append({"effect": name, "dh": dh, "dxy": dxy})
+
+    def cs(imu):
+        t, dth, dv = increments(imu)
+        return increments_table(t, *coning_sculling(dth, dv))
+
+    w = _sim()
+    still = w.truth.stationary.to_numpy() > 0.5
+    add("exact dual increments, true stance", w, w.ideal)
+    add("summed increments (coning/sculling) 200 Hz", w, w.imu)
+    add("  + two-sample coning/sculling correction", w, cs(w.imu))
+    for rate in (100.0, 60.0):
+        wr = _sim(rate=rate, oversample=int(4000 / rate))
+        add(f"summed increments {rate:.0f} Hz", wr, wr.imu)
+        add("  + two-sample coning/sculling correction", wr, cs(wr.imu))
+    wr = _sim(output="rates")
+    add("rate samples (point), trapezoid, 200 Hz", wr, wr.imu)
+    k = int(round(0.01 * 200))
+    add("ZUPT window: late release +10 ms (toe rocker)", w, w.ideal, still=_shift_mask(still, 0, k))
+    add("ZUPT window: early start -10 ms (heel rocker)", w, w.ideal, still=_shift_mask(still, k, 0))
+    add("ZUPT window: late detection / early release 20 ms", w, w.ideal,
+        still=_shift_mask(still, -2 * k, -2 * k))
+    for pivot, lab in ((0.0, "heel"), (0.12, "sensor")):
+        wl = _sim(stance_roll=np.radians(1.0), roll_pivot=pivot)
+        noisy = simulate_imu(wl.ideal, ImuErrorModel(gyro_arw=6.1e-5, accel_vrw=1.4e-3), 1).imu
+        add(f"stance roll 1 deg about the {lab}, detector", wl, noisy, still=None)
+    wc = _sim(impact_time=0.005, heel_strike_velocity=(0.6, 0.6), accel_range=16 * 9.80665)
+    wn = _sim(impact_time=0.005, heel_strike_velocity=(0.6, 0.6))
+    add("hard heel strike (16 g at 200 Hz), no clipping", wn, cs(wn.imu))
+    add("  same, clipped at 16 g (fine samples)", wc, cs(wc.imu))
+    t, dth, dv = increments(w.ideal)
+    for name, m in (("vertical accel scale 1000 ppm", np.diag([1, 1, 1.001])),
+                    ("vertical accel scale 1 %", np.diag([1, 1, 1.01])),
+                    ("accel y-z non-orthogonality 0.1 deg", np.eye(3) + np.radians(0.1) *
+                     np.array([[0, 0, 0], [0, 0, 1], [0, 1, 0]]))):
+        add(name, w, increments_table(t, dth, dv @ m.T))
+    G = np.radians(0.1) / 9.80665 * np.eye(3)  # gyro g-sensitivity 0.1 deg/s/g
+    add("gyro g-sensitivity 0.1 deg/s/g", w, increments_table(t, dth + dv @ G.T, dv))
+    add("gravity error 0.016 m/s^2 (latitude 20 deg off)", w, w.ideal,
+        lat_offset=np.radians(20.0))
+    noisy = simulate_imu(w.ideal, ImuErrorModel(gyro_arw=6.1e-5, accel_vrw=1.4e-3), 1).imu
+    add("VN-100 noise, adaptive detector", w, noisy, still=None)
+    return rows
+
+
+def print_sim(rows: list[dict]) -> None:
+    print(f"simulated level walk, {SIM_STEPS} strides = {SIM_STEPS * 1.4:.1f} m, foot preset:")
+    print(f"{'effect':52s} {'dh end [m]':>10s} {'dxy end [m]':>11s}")
+    for r in rows:
+        print(f"{r['effect']:52s} {r['dh']:+10.3f} {r['dxy']:11.3f}")
+
+
+# --- the level-floor measurement on the real tracks, in the general engine ------------------
+def level_floor_engine(imu, cfg: FootConfig, site, std: float = 0.002,
+                       level_floor: bool = True):
+    """ZUPT at the foot preset's stance samples (+ LevelFloor between stances) in the general
+    engine (insgnss.filter.run_filter): a demonstration of the measurement model until the
+    foot filter runs on the engine. Returns the forward solution (east, north, up)."""
+    from insgnss.detect import detect_stillness, imu_rates
+    from insgnss.earth import geodetic_to_enu
+    from insgnss.filter import run_filter
+    from insgnss.filter.engine import FilterConfig
+    from insgnss.filter.height_aiding import LevelFloor
+    from insgnss.filter.measurements import Zupt
+    from insgnss.foot import initial_state
+    from insgnss.imu import ImuErrorModel
+    from insgnss.strides import still_runs
+
+    stl = detect_stillness(imu, cfg.detector)
+    st = stl.still.to_numpy()
+    t, gyro, acc = imu_rates(imu)
+    init, bg0 = initial_state(t, gyro, acc, st, cfg, *site)
+    model = ImuErrorModel(gyro_bias=cfg.init_gyro_bias_std, accel_bias=cfg.init_accel_bias_std,
+                          gyro_bias_instability=cfg.gyro_bias_rw, accel_bias_instability=
+                          cfg.accel_bias_rw, bias_correlation_time=1e6, gyro_arw=cfg.gyro_psd,
+                          accel_vrw=cfg.accel_psd)
+    fc = FilterConfig(imu_model=model, propagation_interval=0.01, epoch_interval=0.5,
+                      gate_probability=0, gate_recovery=None, smoother=False,
+                      initial_pos_std=cfg.init_pos_std, initial_vel_std=cfg.init_vel_std,
+                      initial_att_std=(cfg.init_att_std, cfg.init_att_std,
+                                       cfg.init_heading_std), gyro_bias=tuple(bg0),
+                      nis_window=None, check_health=False)
+    meas = [Zupt(t[st][1:], std=cfg.sigma_zupt)]
+    if level_floor:
+        meas.append(LevelFloor([(t[a], t[b - 1]) for a, b in still_runs(st)], std=std))
+    f = run_filter(imu, init, meas, fc).forward
+    return np.column_stack(geodetic_to_enu(f.lat.values, f.lon.values, f.height.values,
+                                           init.lat, init.lon, init.height))
+
+
+def run_level_floor(cfg: FootConfig) -> list[dict]:
+    """End height and horizontal metric of the engine with ZUPT, without and with LevelFloor,
+    on x-io, UCR and the PyShoe walking trials."""
+    import pandas as pd
+
+    rows = []
+    for name in ("short_walk", "long_walk"):
+        imu = read_imu_csv(DATA / "foot-xio-gait" / f"{name}.csv", columns=XIO_COLS,
+                           gyro_unit="deg/s", accel_unit="g",
+                           gap_policy=GapPolicy(max_bridge=1.0, long="bridge"))
+        for lf in (False, True):
+            p = level_floor_engine(imu, cfg, SITES["xio"], level_floor=lf)
+            rows.append({"track": f"xio {name.split('_')[0]}", "level_floor": lf,
+                         "horizontal": float(np.hypot(*p[-1, :2])), "height_err": p[-1, 2]})
+    gt = pd.read_csv(DATA / "foot-ucr-zupt" / "positionGt.csv")
+    for side, fname in (("left", "imuMeasLeft.csv"), ("right", "imuMeasRight.csv")):
+        imu = read_imu_csv(DATA / "foot-ucr-zupt" / fname, columns=UCR_COLS,
+                           time_unit="sample", rate_hz=UCR_RATE)
+        truth = gt[[f"pos_{side}_x", f"pos_{side}_y", f"pos_{side}_z"]].to_numpy()
+        for lf in (False, True):
+            p = level_floor_engine(imu, cfg, SITES["ucr"], level_floor=lf)
+            n = min(len(p), len(truth))
+            a, b = p[:n, [1, 0]], truth[:n, :2]
+            R, c = rigid_fit_2d(a, b)
+            rows.append({"track": f"ucr {side}", "level_floor": lf,
+                         "horizontal": float(np.sqrt(np.mean(np.sum((a @ R.T + c - b) ** 2,
+                                                                    axis=1)))),
+                         "height_err": float(p[n - 1, 2] + (truth[n - 1, 2] - truth[0, 2]))})
+    for mat in sorted((DATA / "pyshoe-vicon").glob("2017-11-22-*.mat")):
+        imu, truth = convert.to_insgnss(mat)
+        tz = truth["z"].to_numpy()
+        for lf in (False, True):
+            p = level_floor_engine(imu, cfg, SITES["pyshoe"], level_floor=lf)
+            rows.append({"track": f"pyshoe {mat.stem}", "level_floor": lf,
+                         "horizontal": float("nan"),
+                         "height_err": float(p[-1, 2] - (tz[-1] - tz[0]))})
+    return rows
+
+
+def run_all(cfg: FootConfig, forward: bool = False) -> list[dict]:
+    return run_xio(cfg, forward) + run_ucr(cfg, forward) + run_pyshoe(cfg, forward)
+
+
+def print_table(rows: list[dict]) -> None:
+    print(f"{'track':30s} {'metric':13s} {'horiz [m]':>9s} {'dh end [m]':>10s} "
+          f"{'len raw':>8s} {'len stance':>10s}")
+    for r in rows:
+        print(f"{r['track']:30s} {r['metric']:13s} {r['horizontal']:9.3f} {r['height_err']:10.3f} "
+              f"{r['length_raw']:8.2f} {r['length_stance']:10.2f}")
+    ps = [r for r in rows if r["track"].startswith("pyshoe")]
+    if ps:
+        dh = np.abs([r["height_err"] for r in ps])
+        print(f"PyShoe {len(ps)} trials: mean ARMSE {np.mean([r['horizontal'] for r in ps]):.4f} m,"
+              f" |dh end| mean {dh.mean():.3f} max {dh.max():.3f} m, "
+              f"{int(np.sum(dh > 0.15))} above 0.15 m")
+
+
+def main(argv: list[str] | None = None) -> int:
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument("--config", type=Path, default=None, help="TOML with a [foot] table")
+    p.add_argument("--forward", action="store_true", help="the causal filter, not smoothed")
+    p.add_argument("--json", action="store_true")
+    p.add_argument("--only", choices=["xio", "ucr", "pyshoe", "sim", "level_floor"],
+                   default=None)
+    a = p.parse_args(argv)
+    cfg = load_config(a.config)
+    t0 = time.perf_counter()
+    if a.only == "sim":
+        rows = sim_effects(cfg)
+        print(json.dumps(rows, indent=1)) if a.json else print_sim(rows)
+        return 0
+    if a.only == "level_floor":
+        rows = run_level_floor(cfg)
+        if a.json:
+            print(json.dumps(rows, indent=1))
+        else:
+            print("engine, ZUPT at the foot preset's stances, without / with LevelFloor:")
+            for r in rows:
+                print(f"{r['track']:30s} level_floor={r['level_floor']!s:5s} "
+                      f"horiz {r['horizontal']:7.3f}  dh end {r['height_err']:+7.3f}")
+        return 0
+    if a.only:
+        rows = {"xio": run_xio, "ucr": run_ucr, "pyshoe": run_pyshoe}[a.only](cfg, a.forward)
+    else:
+        rows = run_all(cfg, a.forward)
+    if a.json:
+        print(json.dumps(rows, indent=1))
+    else:
+        print_table(rows)
+        print(f"({time.perf_counter() - t0:.1f} s)")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
