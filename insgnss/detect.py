@@ -445,7 +445,13 @@ class Stillness:
 
 def imu_rates(imu: pd.DataFrame) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """``(t, gyro, accel)`` rate arrays of an IMU table (increments are divided by the interval;
-    row 0 of an increment table takes the rate of row 1)."""
+    row 0 of an increment table takes the rate of row 1).
+
+    Rate tables are returned as sampled. Every noise-sensitive consumer (the detectors'
+    statistics and their noise levels, static-window noise estimates) uses these arrays, never the
+    trapezoidal increments of :func:`insgnss.imu.increments`, whose averaging of neighbouring
+    samples halves the variance of white noise (issue 20).
+    """
     t = np.asarray(imu.index, dtype=float)
     if is_increment_table(imu):
         dt = np.diff(t)

@@ -22,8 +22,11 @@ rate residual (at zero shift, then again at the first estimate) is farther than
 Noise from a static window
 --------------------------
 ``ARW = std(w) sqrt(dt)``, ``VRW = std(f) sqrt(dt)`` per axis (largest axis), the white-noise
-densities the filter needs; on a vehicle with the engine running this captures the vibration,
-which datasheet values do not.
+densities the filter needs. ``w`` and ``f`` are the samples as recorded
+(:func:`insgnss.detect.imu_rates`: rates as they are, increments divided by their interval),
+never the trapezoidal increments of the mechanization, whose averaging of neighbours would halve
+the variance of white noise (issue 20). On a vehicle with the engine running this captures the
+vibration, which datasheet values do not.
 """
 
 from __future__ import annotations
@@ -31,18 +34,11 @@ from __future__ import annotations
 import numpy as np
 import pandas as pd
 
+from .detect import imu_rates
 from .earth import geodetic_to_enu
 from .errors import InvalidValueError
-from .imu import ACCEL_COLS, DTHETA_COLS, DV_COLS, GYRO_COLS, ImuErrorModel, is_increment_table
+from .imu import ImuErrorModel
 from .outages import in_windows
-
-
-def _rates(imu: pd.DataFrame) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    t = imu.index.to_numpy(float)
-    if is_increment_table(imu):
-        dt = np.diff(t, prepend=t[0] - (t[1] - t[0]))[:, None]
-        return t, imu[DTHETA_COLS].to_numpy() / dt, imu[DV_COLS].to_numpy() / dt
-    return t, imu[GYRO_COLS].to_numpy(float), imu[ACCEL_COLS].to_numpy(float)
 
 
 def estimate_time_offset(imu: pd.DataFrame, gnss: pd.DataFrame, windows=(), *,
@@ -65,7 +61,7 @@ def estimate_time_offset(imu: pd.DataFrame, gnss: pd.DataFrame, windows=(), *,
     gap_ok = np.r_[False, np.diff(tg) < 1.5 * np.median(np.diff(tg))]
     gap_ok &= np.r_[gap_ok[1:], False]
     ok = (speed > min_speed) & gap_ok & ~in_windows(tg, list(windows))
-    t, w, _ = _rates(imu)
+    t, w, _ = imu_rates(imu)
     ok &= (tg - span > t[0] + search) & (tg + span < t[-1] - search)
     if ok.sum() < 50 or np.std(course_rate[ok]) < np.radians(1.0):
         raise InvalidValueError("too little turning motion to estimate the IMU-GNSS time offset",
@@ -109,7 +105,7 @@ def estimate_time_offset(imu: pd.DataFrame, gnss: pd.DataFrame, windows=(), *,
 
 def static_noise(imu: pd.DataFrame) -> tuple[float, float]:
     """White-noise densities (ARW [rad/sqrt(s)], VRW [m/s/sqrt(s)]) from a static window."""
-    t, w, f = _rates(imu)
+    t, w, f = imu_rates(imu)
     if t.size < 20:
         raise InvalidValueError("static window too short for a noise estimate", found=t.size)
     dt = float(np.median(np.diff(t)))

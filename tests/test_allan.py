@@ -14,7 +14,7 @@ from insgnss.analysis.allan import (
     extract_coefficients,
     tau_grid,
 )
-from insgnss.imu import DEG_PER_HOUR, GRADES, increments_table
+from insgnss.imu import DEG_PER_HOUR, GRADES, increments_table, rates_table
 from insgnss.mechanization.inverse import inverse_mechanize
 from insgnss.mechanization.strapdown import NAV_COLS
 from insgnss.simulate.sensors import simulate_imu
@@ -145,3 +145,120 @@ def test_allan_cli(tmp_path, capsys):
                 bad)
     assert main(["allan", str(bad)]) == 2
     assert "gyro_x" in capsys.readouterr().err
+
+
+# --- issue 20: rate tables analysed as sampled ------------------------------------------------
+
+def test_white_noise_rates_give_sigma_over_sqrt_m():
+    """White noise given as rates: ADEV(tau0) = sigma within 2 %, ADEV(m tau0) = sigma/sqrt(m)
+    within 3 % for m = 2, 4, 8 (the trapezoidal increments gave -50 %, -21 %, -10 %, -5 %)."""
+    rng = np.random.default_rng(20)
+    rate, n = 100.0, 200_000
+    sigma = np.array([0.01, 0.02, 0.005, 0.03, 0.01, 0.05])  # rad/s, m/s^2
+    w = rng.normal(size=(n, 6)) * sigma
+    imu = rates_table(np.arange(n) / rate, w[:, :3], w[:, 3:])
+    res = allan_analysis(imu)
+    for m, tol in [(1, 0.02), (2, 0.03), (4, 0.03), (8, 0.03)]:
+        a = res.adev.iloc[int(np.argmin(np.abs(res.adev.index - m / rate)))].to_numpy()
+        assert np.all(np.abs(a * np.sqrt(m) / sigma - 1) < tol), (m, a * np.sqrt(m) / sigma)
+    # white noise has no -1 region: no quantisation reported; N = sigma sqrt(tau0)
+    c = res.coefficients
+    assert c["quantization"].isna().all()
+    assert np.all(np.abs(c["white"].to_numpy() / (sigma / np.sqrt(rate)) - 1) < 0.02)
+
+
+def _coloured_noise(rng, n, rate):
+    """White + rate random walk + first-order Gauss-Markov (tau_c = 2 s): a curve with shape."""
+    dt = 1.0 / rate
+    white = rng.normal(size=(n, 6)) * 0.01
+    rw = np.cumsum(rng.normal(size=(n, 6)), 0) * 2e-5
+    phi = np.exp(-dt / 2.0)
+    e = rng.normal(size=(n, 6)) * 0.003
+    gm = np.zeros((n, 6))
+    for k in range(1, n):  # test data only
+        gm[k] = phi * gm[k - 1] + e[k]
+    return white + rw + gm
+
+
+@pytest.mark.parametrize("kind", ["rates", "increments"])
+def test_cli_equals_allantools_on_raw_rates(tmp_path, capsys, kind):
+    """`insgnss allan` = allantools.oadev on the raw rates within 0.5 % at every tau of the grid,
+    for a rate table and for an increment table holding the same samples (x dt)."""
+    import allantools
+
+    from insgnss.cli import main
+    from insgnss.io.native import write_table
+
+    rng = np.random.default_rng(7)
+    rate, n = 100.0, 60_000
+    y = _coloured_noise(rng, n, rate)
+    t = np.arange(n) / rate
+    if kind == "rates":
+        imu, raw = rates_table(t, y[:, :3], y[:, 3:]), y
+    else:
+        # row k holds the increment over (t[k-1], t[k]]; row 0 (before the first sample) is
+        # not used by the analysis, so the raw rates are rows 1..
+        imu, raw = increments_table(t, y[:, :3] / rate, y[:, 3:] / rate), y[1:]
+    src = tmp_path / f"{kind}.csv"
+    write_table(imu, src)
+    assert main(["allan", str(src), "-o", str(tmp_path)]) == 0
+    capsys.readouterr()
+    adev = pd.read_csv(tmp_path / f"{kind}_allan.csv", index_col=0)
+    taus = adev.index.to_numpy()
+    assert np.allclose(taus, tau_grid(raw.shape[0], rate))
+    for j, ax in enumerate(adev.columns):
+        t_ref, ref, _, _ = allantools.oadev(raw[:, j], rate=rate, data_type="freq", taus=taus)
+        assert np.allclose(t_ref, taus)
+        err = adev[ax].to_numpy() / ref - 1
+        assert np.max(np.abs(err)) < 0.005, (ax, taus[np.argmax(np.abs(err))], err.max())
+
+
+def test_quantisation_coefficient_and_arw_beyond_it():
+    """Angle quantisation (quantum q, per-sample error uniform, IEEE 952 model) on top of white
+    rate noise: Q = q / sqrt(12) is read on the -1 slope, its LSB as a rate over one sample is
+    q / tau0 (0.05 deg/s, the LSB of the sensor of issue 20), and N is unaffected by it."""
+    rng = np.random.default_rng(3)
+    rate, n = 100.0, 400_000
+    q = np.radians(0.05) / rate  # angle quantum of a 0.05 deg/s LSB at 100 Hz [rad]
+    N = 1e-5  # ARW [rad/sqrt(s)]: the -1 region spans ~2-5 samples, white dominates beyond 0.2 s
+    e = rng.uniform(-q / 2, q / 2, size=(n + 1, 3))
+    gyro = rng.normal(size=(n, 3)) * N * np.sqrt(rate) + np.diff(e, axis=0) * rate
+    accel = rng.normal(size=(n, 3)) * 1e-3
+    res = allan_analysis(rates_table(np.arange(n) / rate, gyro, accel))
+    c = res.coefficients
+    gy = ["gyro_x", "gyro_y", "gyro_z"]
+    assert np.all(np.abs(c.loc[gy, "quantization"] / (q / np.sqrt(12)) - 1) < 0.05)
+    assert np.all(np.abs(c.loc[gy, "white"] / N - 1) < 0.02)
+    tab = coefficients_table(res)
+    assert np.all(np.abs(tab.loc[gy, "quantization_lsb"] / 0.05 - 1) < 0.05)
+    assert (tab.loc[gy, "quantization_lsb_unit"] == "deg/s").all()
+    assert abs(tab.loc["gyro_x", "quantization"] / (np.degrees(q / np.sqrt(12)) * 3600) - 1) < 0.05
+    # accelerometers: white only, no quantisation
+    assert c.loc[["accel_x", "accel_y", "accel_z"], "quantization"].isna().all()
+
+
+def test_static_noise_and_detector_floor_use_samples_as_recorded():
+    """The other noise estimators on rate data are unbiased: the static-window ARW/VRW equal
+    sigma sqrt(dt) within 2 % and the SHOE detector's noise floor (its statistic at rest) equals
+    its white-noise expectation, for a rate table and for the same samples as increments."""
+    from insgnss.detect import DetectorConfig, detect_stillness
+    from insgnss.preprocess import static_noise
+
+    rng = np.random.default_rng(11)
+    rate, n = 200.0, 40_000
+    sw, sa = 2e-3, 0.02
+    g = np.array([0.0, 0.0, 9.80665])
+    w = rng.normal(size=(n, 3)) * sw
+    f = rng.normal(size=(n, 3)) * sa + g
+    t = np.arange(n) / rate
+    window = 21
+    cfg = DetectorConfig(method="shoe", window=window / rate, sigma_a=sa, sigma_w=sw,
+                         gravity=9.80665)
+    # E[T] = (3 (W-1)/W) [accel about the window mean direction, ~2 dof lost to the mean's
+    # direction over W samples is O(1/W)] + 3 [gyro]: within ~3/W of 6
+    for imu in (rates_table(t, w, f), increments_table(t, w / rate, f / rate)):
+        arw, vrw = static_noise(imu)
+        assert abs(arw / (sw / np.sqrt(rate)) - 1) < 0.02
+        assert abs(vrw / (sa / np.sqrt(rate)) - 1) < 0.02
+        stat = detect_stillness(imu, cfg).statistic.to_numpy()[window:-window]
+        assert abs(np.mean(stat) / 6.0 - 1) < 3.0 / window / 6.0 + 0.02, np.mean(stat)

@@ -10,17 +10,33 @@ The overlapping Allan deviation of each axis is computed by ``allantools.oadev``
 (NIST SP 1065 eq. 11). allantools implements exactly this estimator, vectorised over samples for
 each tau, is maintained and widely used, so it is used as is rather than re-implemented; insgnss
 only chooses the tau grid (log-spaced averaging factors, ~``points_per_decade`` per decade, up to
-``max_fraction`` of the record) and handles increment tables (their cumulative sum *is* the
-phase, no differentiation needed) and rate tables.
+``max_fraction`` of the record) and forms the phase:
+
+- **rate tables** (``gyro_*``, ``accel_*``): each sample is taken as the sensor's average rate over
+  its interval (what the sensor's own filter/decimation delivers), so the phase is the cumulative
+  sum of ``rate x dt`` of the samples *as recorded*. The trapezoidal increments the mechanization
+  uses (:func:`insgnss.imu.increments`, each the mean of two neighbouring samples) must not be
+  used here: averaging neighbours low-passes white noise, halving its variance at one sample and
+  correlating neighbours (for white noise ADEV 50 % low at ``tau = tau0``, 21 % at ``2 tau0``,
+  10 % at ``4 tau0``), exactly where ARW/VRW are read;
+- **increment tables** (``dtheta_*``, ``dv_*``): their cumulative sum *is* the phase; row 0 (the
+  unknown interval before the first sample) is dropped.
 
 Coefficients (IEEE Std 952-1997 annex C; El-Sheimy, Hou & Niu 2008)
 -------------------------------------------------------------------
 With the local log-log slope ``s(tau) = d log sigma / d log tau``:
 
+- **quantisation noise** ``Q`` (``sigma^2 = 3 Q^2 / tau^2``, slope -1): on the first run of the
+  curve (shortest taus) whose slope is ``-1 +- 2 slope_tol``, a line of fixed slope -1 is fitted,
+  ``Q = mean(sigma tau) / sqrt(3)`` [rad, m/s]. An angle (velocity) quantum ``q`` gives
+  ``Q = q / sqrt(12)``; :func:`coefficients_table` also gives the quantum expressed as a rate over
+  one sample, ``sqrt(12) Q / tau0`` (deg/s, mg), to compare with a datasheet LSB;
 - **white noise** (angle / velocity random walk) ``N``: on the part of the curve left of the
   minimum whose slope is ``-1/2 +- slope_tol``, a line of fixed slope -1/2 is fitted in log-log
   (mean of ``log sigma + 1/2 log tau``); ``N`` is its value at ``tau = 1 s``
-  [rad/sqrt(s) = rad/s/sqrt(Hz), m/s/sqrt(s)];
+  [rad/sqrt(s) = rad/s/sqrt(Hz), m/s/sqrt(s)]. Where a quantisation region was found, the fit
+  ignores it: only taus beyond it take part, and its term ``3 Q^2 / tau^2`` is removed from
+  ``sigma^2`` before the slope test and the fit;
 - **bias instability** ``B``: the flicker floor ``sigma = sqrt(2 ln 2 / pi) B = 0.664 B`` around
   the minimum. ``bias_instability_min`` is the classic reading ``sigma_min / 0.664``.
   ``bias_instability`` refines it: over the *flat region* (the contiguous taus around the
@@ -35,7 +51,7 @@ With the local log-log slope ``s(tau) = d log sigma / d log tau``:
 
 Coefficients that have no region of the required slope are NaN. The coefficients are reported
 in SI and, by :func:`coefficients_table`, in datasheet units (deg/sqrt(h), deg/h, deg/h/sqrt(h),
-m/s/sqrt(h), ug, ug/sqrt(s)) with the conversions of :mod:`insgnss.imu`.
+m/s/sqrt(h), ug, ug/sqrt(s), arcsec, m/s) with the conversions of :mod:`insgnss.imu`.
 
 Only taus with at least ``min_clusters`` independent clusters (``T / tau``) take part in the
 extraction; the curve is computed further for plotting.
@@ -57,17 +73,24 @@ import numpy as np
 import pandas as pd
 
 from ..imu import (
+    ACCEL_COLS,
+    DEG,
     DEG_PER_HOUR,
     DEG_PER_HOUR_PER_SQRT_HOUR,
     DEG_PER_SQRT_HOUR,
+    DTHETA_COLS,
+    DV_COLS,
+    GYRO_COLS,
     M_S_PER_SQRT_HOUR,
+    MG,
     UG,
-    increments,
+    is_increment_table,
 )
 
 AXES = ["gyro_x", "gyro_y", "gyro_z", "accel_x", "accel_y", "accel_z"]
 FLICKER_FACTOR = float(np.sqrt(2.0 * np.log(2.0) / np.pi))  # 0.6643
-COEFF_COLS = ["white", "bias_instability", "bias_instability_min", "tau_min", "rrw"]
+COEFF_COLS = ["quantization", "white", "bias_instability", "bias_instability_min", "tau_min", "rrw"]
+ARCSEC = DEG / 3600.0  #: arcsec -> rad
 
 
 @dataclass
@@ -81,7 +104,8 @@ class AllanResult:
     clusters : ndarray
         ``T / tau`` for each tau (number of independent averaging windows).
     coefficients : DataFrame
-        Index the six axes; columns ``white`` (N: ARW [rad/sqrt(s)] or VRW [m/s/sqrt(s)]),
+        Index the six axes; columns ``quantization`` (Q [rad, m/s]), ``white`` (N: ARW
+        [rad/sqrt(s)] or VRW [m/s/sqrt(s)]),
         ``bias_instability`` (B [rad/s, m/s^2], refined), ``bias_instability_min``
         (``sigma_min / 0.664``), ``tau_min`` [s], ``rrw`` (K [rad/s/sqrt(s), m/s^2/sqrt(s)]).
     duration, rate : float
@@ -142,12 +166,39 @@ def extract_coefficients(taus: np.ndarray, adev: np.ndarray, duration: float, *,
     out["tau_min"] = float(t[i_min])
     out["bias_instability_min"] = float(s[i_min] / FLICKER_FACTOR)
     left = np.arange(t.size) <= i_min
-    # white noise: the first run (shortest taus) of slope -1/2 left of the minimum
-    runs = _runs(left & (np.abs(slope + 0.5) <= slope_tol))
-    N = np.nan
-    if runs:
-        sel = runs[0]
-        N = float(np.exp(np.mean(ls[sel] + 0.5 * lt[sel])))
+    # quantisation: the run of slope -1 that starts at the shortest tau (the -1 region can only
+    # be the left end of the curve); wider tolerance than the other slopes because the
+    # quantisation-to-white transition bends the curve early
+    runs = _runs(left & (np.abs(slope + 1.0) <= 2.0 * slope_tol))
+    q_sel = runs[0] if runs and runs[0][0] == 0 and runs[0].size >= 2 else None
+    white_from = 0 if q_sel is None else int(q_sel[-1]) + 1
+    beyond = np.arange(t.size) >= white_from
+    Q, N = np.nan, np.nan
+    q_term = np.zeros_like(t)
+    # Q and N each from their own region with the other's (fixed-slope) term removed; the two
+    # regions overlap in their tails, so alternate a few times (converges in 2-3 passes)
+    for _ in range(4 if q_sel is not None else 1):
+        # white noise: the first run (shortest taus) of slope -1/2 left of the minimum, beyond
+        # the quantisation region and with its 3 Q^2 / tau^2 removed
+        sw2 = s**2 - q_term
+        ok_w = beyond & (sw2 > 0)
+        N = np.nan
+        if np.count_nonzero(ok_w) >= 3:
+            lsw = np.full_like(ls, np.nan)
+            lsw[ok_w] = 0.5 * np.log(sw2[ok_w])
+            slope_w = np.full_like(ls, np.nan)
+            slope_w[ok_w] = np.gradient(lsw[ok_w], lt[ok_w])
+            runs = _runs(left & ok_w & (np.abs(slope_w + 0.5) <= slope_tol))
+            if runs:
+                sel = runs[0]
+                N = float(np.exp(np.mean(lsw[sel] + 0.5 * lt[sel])))
+        if q_sel is None:
+            break
+        sq2 = s[q_sel] ** 2 - (N**2 / t[q_sel] if np.isfinite(N) else 0.0)
+        sq2 = np.maximum(sq2, 1e-3 * s[q_sel] ** 2)
+        Q = float(np.exp(np.mean(0.5 * np.log(sq2) + lt[q_sel])) / np.sqrt(3.0))
+        q_term = 3.0 * Q**2 / t**2
+    out["quantization"] = Q
     out["white"] = N
     # rate random walk: the longest run of slope +1/2 right of the minimum
     runs = _runs(~left & (np.abs(slope - 0.5) <= slope_tol))
@@ -159,6 +210,7 @@ def extract_coefficients(taus: np.ndarray, adev: np.ndarray, duration: float, *,
     # bias instability: the flat region is where the floor C dominates the fitted white-noise
     # and rate-random-walk lines; C is the weighted mean of sigma^2 minus those lines there
     white = N**2 / t if np.isfinite(N) else np.zeros_like(t)
+    white = white + (3.0 * Q**2 / t**2 if np.isfinite(Q) else 0.0)
     rrw = K**2 * t / 3.0 if np.isfinite(K) else np.zeros_like(t)
     resid = s**2 - white - rrw
     w = 1.0 / (t * s**4)  # 1 / var(sigma^2 estimate), up to a constant
@@ -190,7 +242,7 @@ def allan_analysis(imu: pd.DataFrame, *, points_per_decade: int = 10, max_fracti
     slope_tol, min_clusters
         Extraction settings (see the module docstring).
     """
-    t, dth, dv = increments(imu)
+    t = np.asarray(imu.index, dtype=float)
     if t.size < 16:
         raise ValueError("Allan analysis needs a longer record (at least 16 samples)")
     dts = np.diff(t)
@@ -198,15 +250,20 @@ def allan_analysis(imu: pd.DataFrame, *, points_per_decade: int = 10, max_fracti
     if np.max(np.abs(dts - dt)) > 0.01 * dt:
         raise ValueError("Allan analysis needs a uniform sample rate (time steps vary by > 1 %)")
     rate = 1.0 / dt
-    # drop row 0: for increment tables it is the unknown interval before the first sample
-    data = np.column_stack([dth, dv])[1:]
+    inc = is_increment_table(imu)
+    if inc:
+        # drop row 0: the unknown interval before the first sample
+        data = imu[DTHETA_COLS + DV_COLS].to_numpy(float)[1:]
+    else:
+        # the rates as sampled (never the trapezoidal increments: see the module docstring)
+        data = imu[GYRO_COLS + ACCEL_COLS].to_numpy(float)
     n = data.shape[0]
     duration = n * dt
     taus = tau_grid(n, rate, points_per_decade, max_fraction)
     cols = {}
     t_used = taus
     for j, ax in enumerate(AXES):
-        t_used, cols[ax] = allan_deviation_series(data[:, j], rate, taus, increments_input=True)
+        t_used, cols[ax] = allan_deviation_series(data[:, j], rate, taus, increments_input=inc)
     adev = pd.DataFrame(cols, index=pd.Index(t_used, name="tau"))
     coeffs = pd.DataFrame(
         [extract_coefficients(t_used, adev[ax].to_numpy(), duration, slope_tol=slope_tol,
@@ -222,6 +279,7 @@ DATASHEET_UNITS = [
     ("bias_instability", "deg/h", DEG_PER_HOUR, "ug", UG),
     ("bias_instability_min", "deg/h", DEG_PER_HOUR, "ug", UG),
     ("rrw", "deg/h/sqrt(h)", DEG_PER_HOUR_PER_SQRT_HOUR, "ug/sqrt(s)", UG),
+    ("quantization", "arcsec", ARCSEC, "m/s", 1.0),
 ]
 
 
@@ -230,7 +288,8 @@ def coefficients_table(result: AllanResult) -> pd.DataFrame:
 
     Columns: ``arw_vrw`` (deg/sqrt(h) for gyros, m/s/sqrt(h) for accelerometers),
     ``bias_instability`` and ``bias_instability_min`` (deg/h, ug), ``rrw`` (deg/h/sqrt(h),
-    ug/sqrt(s)), ``tau_min`` [s].
+    ug/sqrt(s)), ``quantization`` (Q: arcsec, m/s), ``quantization_lsb`` (the quantum
+    ``sqrt(12) Q`` as a rate over one sample, ``sqrt(12) Q / tau0``: deg/s, mg), ``tau_min`` [s].
     """
     c = result.coefficients
     rows = []
@@ -241,6 +300,9 @@ def coefficients_table(result: AllanResult) -> pd.DataFrame:
             name = "arw_vrw" if col == "white" else col
             row[name] = c.loc[ax, col] / (fg if g else fa)
             row[f"{name}_unit"] = ug_ if g else ua
+        row["quantization_lsb"] = np.sqrt(12.0) * c.loc[ax, "quantization"] * result.rate \
+            / (DEG if g else MG)
+        row["quantization_lsb_unit"] = "deg/s" if g else "mg"
         row["tau_min"] = c.loc[ax, "tau_min"]
         rows.append(row)
     return pd.DataFrame(rows).set_index("axis")
@@ -268,6 +330,9 @@ def plot_allan(result: AllanResult, title: str | None = None):
             c = result.coefficients.loc[name]
             col = colors[j]
             ax.loglog(tau, result.adev[name] / scale, color=col, lw=1.5, label=name)
+            if np.isfinite(c["quantization"]):
+                ax.loglog(tau, np.sqrt(3.0) * c["quantization"] / tau / scale, ls=(0, (1, 3)),
+                          color=col, lw=1)
             if np.isfinite(c["white"]):
                 ax.loglog(tau, c["white"] / np.sqrt(tau) / scale, ":", color=col, lw=1)
                 ax.plot([1.0], [c["white"] / scale], "o", color=col, ms=4)
@@ -284,7 +349,8 @@ def plot_allan(result: AllanResult, title: str | None = None):
         ax.set_ylabel(f"Allan deviation [{unit}]")
         ax.set_title({"gyro": "gyroscopes", "accel": "accelerometers"}[sensor])
         ax.grid(True, which="both", alpha=0.3)
-        ax.legend(title="dotted: -1/2 (N at 1 s), dashed: 0.664 B, dash-dot: +1/2 (K at 3 s)",
+        ax.legend(title="sparse dots: -1 (Q), dotted: -1/2 (N at 1 s),\n"
+                        "dashed: 0.664 B, dash-dot: +1/2 (K at 3 s)",
                   fontsize=8, title_fontsize=7)
     if title:
         fig.suptitle(title)

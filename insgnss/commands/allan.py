@@ -1,9 +1,11 @@
 """Allan deviation of a static IMU log with ARW/VRW, bias instability and rate random walk.
 
 Reads a native insgnss IMU table (increments ``dtheta_* dv_*`` or rates ``gyro_* accel_*``),
-computes the overlapping Allan deviation of the six axes, prints the noise coefficients in
-datasheet units and writes ``<stem>_allan.png`` (curves with the fitted -1/2, 0 and +1/2 reference
-slopes), ``<stem>_allan.csv`` (the deviation per tau, SI) and ``<stem>_allan_coefficients.csv``.
+computes the overlapping Allan deviation of the six axes (rate tables from the rates as sampled,
+increment tables from the increments), prints the noise coefficients in datasheet units
+(quantisation Q where the curve shows the -1 slope, ARW/VRW, bias instability, RRW) and writes
+``<stem>_allan.png`` (curves with the fitted -1, -1/2, 0 and +1/2 reference slopes),
+``<stem>_allan.csv`` (the deviation per tau, SI) and ``<stem>_allan_coefficients.csv``.
 
 Example::
 
@@ -62,10 +64,12 @@ def run(args: argparse.Namespace) -> int:
     coef_csv = atomic_write(out / f"{stem}_allan_coefficients.csv",
                             lambda p: table.to_csv(p, float_format="%.6g"))
     print(f"{src}: {result.duration:.1f} s at {result.rate:g} Hz")
-    print(f"{'axis':8s} {'ARW/VRW':>22s} {'bias instab.':>18s} {'(min/0.664)':>12s} "
-          f"{'tau_min [s]':>11s} {'RRW':>24s}")
+    print(f"{'axis':8s} {'quantisation Q (as LSB)':>32s} {'ARW/VRW':>22s} {'bias instab.':>18s} "
+          f"{'(min/0.664)':>12s} {'tau_min [s]':>11s} {'RRW':>24s}")
     for ax, r in table.iterrows():
-        print(f"{ax:8s} {r['arw_vrw']:10.4g} {r['arw_vrw_unit']:>11s} "
+        print(f"{ax:8s} {r['quantization']:9.3g} {r['quantization_unit']:>6s} "
+              f"({r['quantization_lsb']:8.3g} {r['quantization_lsb_unit']:>5s}) "
+              f"{r['arw_vrw']:10.4g} {r['arw_vrw_unit']:>11s} "
               f"{r['bias_instability']:10.4g} {r['bias_instability_unit']:>7s} "
               f"{r['bias_instability_min']:12.4g} {r['tau_min']:11.4g} "
               f"{r['rrw']:10.4g} {r['rrw_unit']:>13s}")
