@@ -224,6 +224,8 @@ SCHEMA: dict[str, Any] = {
         "dir": _spec(str, "out", "output folder (relative to the job file)"),
         "report": _spec(bool, True, "write report.html"),
         "formats": _spec(list, ["csv"], "trajectory formats: csv, nav, kml, geojson"),
+        "figures": _spec(list, [], "report figures also written as fig_<name>.<ext> beside "
+                         "the report", choices=["png", "pdf", "svg"]),
         "point": _spec(str, "imu", "trajectory point written: imu or antenna",
                        choices=["imu", "antenna"]),
         "progress": _spec(bool, True),
@@ -253,7 +255,12 @@ def _check_value(value, spec, key: str, file) -> Any:
     if not ok:
         raise ConfigError("wrong type", file=file, column=key, expected=_type_name(kind),
                           found=f"{type(value).__name__} {value!r}")
-    if spec["choices"] is not None and value not in spec["choices"]:
+    if spec["choices"] is not None and kind is list:  # a list of choices
+        bad = [v for v in value if v not in spec["choices"]]
+        if bad:
+            raise ConfigError("value not allowed", file=file, column=key,
+                              expected=f"some of {spec['choices']}", found=repr(bad))
+    elif spec["choices"] is not None and value not in spec["choices"]:
         raise ConfigError("value not allowed", file=file, column=key,
                           expected=f"one of {spec['choices']}", found=repr(value))
     return float(value) if kind is _NUM else value

@@ -1,9 +1,20 @@
-"""Static HTML report of a processing run: one self-contained page (figures embedded as PNG),
-readable offline in any browser, no server and no scripts.
+"""HTML report of a processing run: a static page and an interactive page.
 
-Sections: summary, per-outage table, track map (solution, GNSS epochs used, outage spans),
-position errors against the reference with the filter's 3-sigma envelopes, drift inside each
-outage, estimated IMU biases with their sigmas, normalized innovations.
+``report.html`` is self-contained and static (figures embedded as PNG, no scripts): it opens
+offline in any browser, prints, and is what goes into an e-mail or an appendix.
+``report_interactive.html`` (:mod:`insgnss.report_interactive`) holds the same summary and the
+same figures as zoomable plotly charts (plotly.js embedded once, offline; map tiles only on
+request when online). The static page links to it.
+
+Page: an ``INCOMPLETE`` banner with the stop reason when the filter stopped early; the run
+(job, source, insgnss version, process, IMU model, outages), the initialization, the
+measurements offered / applied / rejected / recovered per type, timing, preprocessing and
+autotuned parameters when present; accuracy against the reference, per-outage tables,
+consistency (epochs outside 3 sigma, mean NEES / NIS); what is not shown and why; the figures of
+:mod:`insgnss.plots` (``REPORT_FIGURES``) with captions; the resolved job.
+
+``[outputs] figures = ["png", "pdf", "svg"]`` also writes every figure as ``fig_<key>.<ext>``
+beside the report (vector PDF/SVG for papers).
 """
 
 from __future__ import annotations
@@ -11,218 +22,321 @@ from __future__ import annotations
 import base64
 import html
 import io
+import json
 import os
+from pathlib import Path
 
-import matplotlib
+import numpy as np
+import pandas as pd
 
-matplotlib.use("Agg", force=False)
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
-import pandas as pd  # noqa: E402
+from .io.native import atomic_write, atomic_write_text
+from .report_data import (
+    FIGURE_FORMATS,
+    INTERACTIVE_NAME,
+    NEES_NAMES,
+    ReportData,
+    build_report_data,
+    excursion_table,
+    figure_file,
+)
 
-from .io.native import atomic_write_text  # noqa: E402
-from .outages import in_windows, window_index  # noqa: E402
-from .plots import local_enu  # noqa: E402
+PNG_DPI = 150
 
-
-def _png(fig) -> str:
-    buf = io.BytesIO()
-    fig.savefig(buf, format="png", dpi=110)
-    plt.close(fig)
-    return base64.b64encode(buf.getvalue()).decode("ascii")
-
-
-def track_figure(result):
-    sol = result.filter.smoothed if result.filter.smoothed is not None else result.filter.forward
-    gnss = result.inputs.gnss
-    lat0, lon0, h0 = (float(sol[c].iloc[0]) for c in ("lat", "lon", "height"))
-    enu = local_enu(sol, (lat0, lon0, h0))
-    fig, ax = plt.subplots(figsize=(8, 7), layout="constrained")
-    ax.plot(enu[:, 0], enu[:, 1], "-", color="tab:blue", lw=1.0, label="solution")
-    t = sol.index.to_numpy(float)
-    if result.windows:
-        k = window_index(t, result.windows)
-        for w in range(len(result.windows)):
-            m = k == w
-            if np.any(m):
-                ax.plot(enu[m, 0], enu[m, 1], "-", color="tab:red", lw=2.0,
-                        label="GNSS outage" if w == 0 else None)
-    if gnss is not None and len(gnss):
-        g = gnss[~in_windows(gnss.index.to_numpy(float), result.windows)]
-        ge = local_enu(g, (lat0, lon0, h0))
-        ax.plot(ge[:, 0], ge[:, 1], ".", color="k", ms=2, label="GNSS epochs used")
-    ax.set(xlabel="east [m]", ylabel="north [m]", title="track")
-    ax.axis("equal")
-    ax.grid(True, alpha=0.3)
-    ax.legend(loc="best", fontsize=8)
-    return fig
+STYLE = (
+    "body{font-family:system-ui,-apple-system,'Segoe UI',sans-serif;max-width:1180px;"
+    "margin:1.5em auto;padding:0 1em;color:#222;line-height:1.4}"
+    "h1{font-size:1.5em;margin-bottom:0.2em}h2{font-size:1.2em;margin-top:1.6em;"
+    "border-bottom:1px solid #ccc}h3{font-size:1.0em}"
+    "table{border-collapse:collapse;margin:0.4em 0 1em 0;font-size:0.9em}"
+    "td,th{padding:2px 9px;border-bottom:1px solid #e3e3e3;text-align:right;"
+    "vertical-align:top}th{background:#f4f4f4}td.l,th.l{text-align:left}"
+    "table.kv th{text-align:left;background:none;font-weight:600}table.kv td{text-align:left}"
+    ".banner{background:#b00020;color:#fff;padding:0.8em 1em;font-size:1.1em;border-radius:4px}"
+    ".banner b{font-size:1.2em}.note{color:#555;font-size:0.9em}"
+    "figure{margin:1em 0 2em 0}figure img{max-width:100%;height:auto;border:1px solid #eee}"
+    "figcaption{font-size:0.9em;color:#444;max-width:900px}"
+    "pre{background:#f7f7f7;padding:0.6em;overflow-x:auto;font-size:0.85em}"
+    "nav a{margin-right:0.8em}"
+)
 
 
-def error_figure(result):
-    ev = result.evaluation
-    if not ev:
-        return None
-    names = [n for n in ("forward", "smoothed") if n in ev]
-    fig, axes = plt.subplots(3, len(names), figsize=(6 * len(names), 8), sharex=True,
-                             squeeze=False, layout="constrained")
-    for j, name in enumerate(names):
-        err = ev[name]["errors"]
-        t = err.index.to_numpy(float) - err.index[0]
-        for i, (c, s) in enumerate((("east", "east_std"), ("north", "north_std"),
-                                    ("up", "up_std"))):
-            a = axes[i, j]
-            a.plot(t, err[c], lw=0.8, color="tab:blue", label="error")
-            if s in err.columns:
-                a.fill_between(t, -3 * err[s], 3 * err[s], color="tab:orange", alpha=0.25,
-                               label="filter 3-sigma")
-            for w0, w1 in result.windows:
-                a.axvspan(w0 - err.index[0], w1 - err.index[0], color="tab:red", alpha=0.08)
-            a.set_ylabel(f"{c} error [m]")
-            a.grid(True, alpha=0.3)
-            if i == 0:
-                a.set_title(f"{name} position error vs reference")
-                a.legend(fontsize=8, loc="upper right")
-        axes[-1, j].set_xlabel("time since first reference epoch [s]")
-    return fig
+# --- formatting ---------------------------------------------------------------------------------
+def fmt(v) -> str:
+    """A value for a table cell: 4 significant digits, '-' for None/NaN, lists and dicts
+    compact (never a raw Python repr)."""
+    if v is None:
+        return "-"
+    if isinstance(v, bool | np.bool_):
+        return "yes" if v else "no"
+    if isinstance(v, int | np.integer):
+        return f"{int(v):d}"
+    if isinstance(v, float | np.floating):
+        if not np.isfinite(v):
+            return "-"
+        a = abs(float(v))
+        return f"{v:.4g}" if a == 0 or 1e-3 <= a < 1e6 else f"{v:.3e}"
+    if isinstance(v, dict):
+        return ", ".join(f"{k}: {fmt(x)}" for k, x in v.items()) or "-"
+    if isinstance(v, list | tuple | np.ndarray):
+        items = [fmt(x) for x in v]
+        if len(items) > 8:
+            items = items[:8] + [f"... ({len(v)} in all)"]
+        return "[" + ", ".join(items) + "]" if items else "-"
+    return str(v)
 
 
-def drift_figure(result):
-    ev = result.evaluation
-    if not ev or not result.windows:
-        return None
-    fig, ax = plt.subplots(1, len(ev), figsize=(6 * len(ev), 4), squeeze=False,
-                           layout="constrained")
-    for j, (name, e) in enumerate(ev.items()):
-        err = e["errors"]
-        t = err.index.to_numpy(float)
-        k = window_index(t, result.windows)
-        for w, (w0, _) in enumerate(result.windows):
-            m = k == w
-            if np.any(m):
-                ax[0, j].plot(t[m] - w0, err["horizontal"].to_numpy()[m], lw=1.0)
-        ax[0, j].set(xlabel="time since outage start [s]", ylabel="horizontal error [m]",
-                     title=f"{name}: drift inside each outage")
-        ax[0, j].grid(True, alpha=0.3)
-    return fig
+def _kv(rows: list[tuple[str, object]]) -> str:
+    body = "".join(f"<tr><th>{html.escape(k)}</th><td>{html.escape(fmt(v))}</td></tr>"
+                   for k, v in rows if v is not None)
+    return f"<table class='kv'>{body}</table>"
 
 
-def bias_figure(result):
-    sol = result.filter.smoothed if result.filter.smoothed is not None else result.filter.forward
-    cols = ["gyro_bias_x", "gyro_bias_y", "gyro_bias_z", "accel_bias_x", "accel_bias_y",
-            "accel_bias_z"]
-    if not all(c in sol.columns for c in cols):
-        return None
-    t = sol.index.to_numpy(float) - sol.index[0]
-    step = max(1, len(t) // 4000)
-    fig, ax = plt.subplots(1, 2, figsize=(12, 4), layout="constrained")
-    for c in cols[:3]:
-        y = np.degrees(sol[c].to_numpy()[::step]) * 3600
-        ax[0].plot(t[::step], y, lw=1.0, label=c[-1])
-        if f"{c}_std" in sol.columns:
-            s = np.degrees(sol[f"{c}_std"].to_numpy()[::step]) * 3600
-            ax[0].fill_between(t[::step], y - s, y + s, alpha=0.15)
-    for c in cols[3:]:
-        y = sol[c].to_numpy()[::step] / 9.80665e-3
-        ax[1].plot(t[::step], y, lw=1.0, label=c[-1])
-        if f"{c}_std" in sol.columns:
-            s = sol[f"{c}_std"].to_numpy()[::step] / 9.80665e-3
-            ax[1].fill_between(t[::step], y - s, y + s, alpha=0.15)
-    ax[0].set(xlabel="time [s]", ylabel="gyro bias [deg/h]", title="gyro bias (+-1 sigma)")
-    ax[1].set(xlabel="time [s]", ylabel="accelerometer bias [mg]",
-              title="accelerometer bias (+-1 sigma)")
-    for a in ax:
-        a.grid(True, alpha=0.3)
-        a.legend(fontsize=8)
-    return fig
-
-
-def innovation_figure(result):
-    inn = result.filter.innovations
-    if inn is None or not len(inn):
-        return None
-    types = list(dict.fromkeys(inn["type"]))
-    fig, ax = plt.subplots(len(types), 1, figsize=(10, 2.4 * len(types)), squeeze=False,
-                           sharex=True, layout="constrained")
-    t0 = float(inn["time"].min())
-    for i, ty in enumerate(types):
-        d = inn[inn["type"] == ty]
-        t = d["time"].to_numpy(float) - t0
-        k = 0
-        while f"innov_{k}" in d.columns and f"innov_std_{k}" in d.columns:
-            v = d[f"innov_{k}"].to_numpy(float) / d[f"innov_std_{k}"].to_numpy(float)
-            if np.isfinite(v).any():
-                ax[i, 0].plot(t, v, ".", ms=1.5, label=f"component {k}")
-            k += 1
-        rej = d[~d["accepted"].astype(bool)]
-        if len(rej):
-            ax[i, 0].plot(rej["time"].to_numpy(float) - t0, np.zeros(len(rej)), "rx", ms=4,
-                          label=f"rejected ({len(rej)})")
-        ax[i, 0].set(ylabel="normalized", title=f"{ty} innovations / predicted sigma")
-        ax[i, 0].axhline(3, color="k", lw=0.5, ls="--")
-        ax[i, 0].axhline(-3, color="k", lw=0.5, ls="--")
-        ax[i, 0].grid(True, alpha=0.3)
-        if ax[i, 0].get_legend_handles_labels()[0]:
-            ax[i, 0].legend(fontsize=7, loc="upper right", markerscale=3)
-    ax[-1, 0].set_xlabel("time [s]")
-    return fig
-
-
-def _table(df: pd.DataFrame) -> str:
-    return df.to_html(index=False, float_format=lambda v: f"{v:.3f}", border=0,
-                      classes="tab")
-
-
-def _summary_rows(summary: dict) -> str:
+def table_html(df: pd.DataFrame, left: tuple = ()) -> str:
+    """A DataFrame as an HTML table with :func:`fmt` cells; all-NaN columns dropped."""
+    if df is None or not len(df):
+        return ""
+    keep = [c for c in df.columns if not (df[c].dtype.kind in "fc" and df[c].isna().all())]
+    df = df[keep]
+    head = "".join(f"<th class='{'l' if c in left else ''}'>{html.escape(str(c))}</th>"
+                   for c in df.columns)
     rows = []
-    for k in ("job", "source", "complete", "imu_samples", "imu_model"):
-        rows.append(f"<tr><th>{k}</th><td>{html.escape(str(summary.get(k)))}</td></tr>")
-    ini = summary.get("initialization", {})
-    rows.append("<tr><th>initialization</th><td>" + html.escape(
-        f"{ini.get('method')} ({ini.get('heading_source')}): roll "
-        f"{ini.get('roll_deg', 0):.2f}, pitch {ini.get('pitch_deg', 0):.2f}, heading "
-        f"{ini.get('heading_deg', 0):.2f} deg") + "</td></tr>")
-    from .job.summary import measurement_rows
-
-    rows.append("<tr><th>measurements</th><td>" + "<br>".join(
-        html.escape(r) for r in measurement_rows(summary)) + "</td></tr>")
-    timing = summary.get("timing_s", {})
-    rows.append("<tr><th>timing [s]</th><td>" + html.escape(
-        ", ".join(f"{k} {v:.2f}" for k, v in timing.items())) + "</td></tr>")
-    return "\n".join(rows)
+    for _, r in df.iterrows():
+        rows.append("".join(f"<td class='{'l' if c in left else ''}'>{html.escape(fmt(r[c]))}"
+                            "</td>" for c in df.columns))
+    return "<table><tr>" + head + "</tr>" + "".join(f"<tr>{r}</tr>" for r in rows) + "</table>"
 
 
-def render_report(result) -> str:
-    """The report as an HTML string."""
+def _flatten(d: dict, prefix: str = "") -> list[tuple[str, object]]:
+    out = []
+    for k, v in d.items():
+        if isinstance(v, dict) and v and all(not isinstance(x, dict | list) for x in v.values()) \
+                and len(v) <= 4:
+            out.append((f"{prefix}{k}", v))
+        elif isinstance(v, dict):
+            out.extend(_flatten(v, f"{prefix}{k}."))
+        else:
+            out.append((f"{prefix}{k}", v))
+    return out
+
+
+def measurement_counts(summary: dict, innovations: pd.DataFrame | None = None) -> pd.DataFrame:
+    """Offered / applied / rejected / recovered per measurement type, from either form of
+    ``summary["measurements"]``: per type ``{"offered", "applied", "rejected", "recovered"}``, or
+    the older ``{type: count}`` with ``summary["rejected"] = {type: count}`` (then applied and
+    recovered come from the innovation log when it has them)."""
+    meas = summary.get("measurements") or {}
+    rej = summary.get("rejected") or {}
+    rows = []
+    for ty, v in meas.items():
+        if isinstance(v, dict):
+            row = {"measurement": ty, **{k: v.get(k) for k in
+                                         ("offered", "applied", "rejected", "recovered")}}
+        else:
+            row = {"measurement": ty, "offered": int(v), "applied": None,
+                   "rejected": int(rej.get(ty, 0)), "recovered": None}
+            if innovations is not None and "type" in innovations.columns:
+                d = innovations[innovations["type"] == ty]
+                if len(d) and "accepted" in d.columns:
+                    row["applied"] = int(d["accepted"].astype(bool).sum())
+                if len(d) and "recovered" in d.columns:
+                    row["recovered"] = int(d["recovered"].astype(bool).sum())
+        rows.append(row)
+    return pd.DataFrame(rows, columns=["measurement", "offered", "applied", "rejected",
+                                       "recovered"])
+
+
+ACCURACY_COLUMNS = {  # summary key -> readable header
+    "rms_h_m": "horizontal RMS [m]", "max_h_m": "horizontal max [m]",
+    "non_outage_rms_h_m": "outside outages, horizontal RMS [m]",
+    "non_outage_rms_v_m": "outside outages, vertical RMS [m]",
+    "end_h_err_m_mean": "outage end error, mean [m]",
+    "end_h_err_m_max": "outage end error, max [m]",
+    "rms_h_err_m_mean": "in-outage RMS, mean [m]",
+    "max_h_err_m_mean": "in-outage max, mean [m]",
+    "n_covered": "reference epochs",
+}
+
+
+OUTAGE_COLUMNS = {"start": "start [s]", "end": "end [s]", "n_epochs": "reference epochs",
+                  "end_h_err_m": "horizontal error at end [m]",
+                  "max_h_err_m": "max horizontal [m]", "rms_h_err_m": "RMS horizontal [m]",
+                  "end_v_err_m": "vertical error at end [m]", "complete": "fully covered"}
+
+
+def banner_html(summary: dict) -> str:
+    """The INCOMPLETE banner of a run that stopped early ('' for a complete run)."""
+    if summary.get("complete", True):
+        return ""
+    at = summary.get("stopped_at")
+    return ("<div class='banner' id='incomplete'><b>INCOMPLETE</b>: the filter stopped early"
+            + (f" at t = {fmt(at)} s" if at is not None else "") + ": "
+            + html.escape(str(summary.get("error") or "unknown reason"))
+            + ". The trajectories, logs and figures end there.</div>")
+
+
+def _version(summary: dict) -> str:
+    if summary.get("version"):
+        return str(summary["version"])
+    from . import __version__
+
+    return f"{__version__} (report writer)"
+
+
+def _resolved_job(result) -> str:
     s = result.summary
-    parts = [f"<h1>insgnss report: {html.escape(str(s.get('job')))}</h1>",
-             "<h2>Summary</h2><table class='kv'>" + _summary_rows(s) + "</table>"]
-    ev = s.get("evaluation", {})
+    job = s.get("job_resolved")
+    if job is None:
+        job = {**result.job.settings, **({"simulation": result.job.simulation}
+                                         if result.job.simulation else {})}
+    from .io.native import jsonable
+
+    return json.dumps(jsonable(job), indent=2, default=str)
+
+
+def summary_html(result, data: ReportData) -> str:
+    """Banner, summary tables, accuracy, outages, consistency and notes (shared by both
+    pages)."""
+    s = result.summary
+    ini = s.get("initialization") or {}
+    parts = [banner_html(s)]
+    run = [("job", s.get("job")), ("source", s.get("source")), ("seed", s.get("seed")),
+           ("insgnss version", _version(s)),
+           ("process", s.get("preset") or s.get("process_model")),
+           ("complete", s.get("complete")), ("IMU samples", s.get("imu_samples")),
+           ("IMU model", s.get("imu_model")),
+           ("GNSS outages", f"{len(data.windows)}: " + ", ".join(
+               f"{fmt(a)}-{fmt(b)} s" for a, b in data.windows) if data.windows else "none"),
+           ("reference", ", ".join(data.reference_kinds) if data.reference_kinds else "none")]
+    parts.append("<h2 id='summary'>Summary</h2><h3>Run</h3>" + _kv(run))
+    if ini:
+        parts.append("<h3>Initialization</h3>" + _kv([
+            ("method", ini.get("method")), ("heading source", ini.get("heading_source")),
+            ("time [s]", ini.get("time")), ("roll [deg]", ini.get("roll_deg")),
+            ("pitch [deg]", ini.get("pitch_deg")), ("heading [deg]", ini.get("heading_deg"))]))
+    counts = measurement_counts(s, data.innovations)
+    if len(counts):
+        parts.append("<h3>Measurements</h3>" + table_html(counts, left=("measurement",)))
+    timing = s.get("timing_s") or {}
+    if timing:
+        parts.append("<h3>Timing [s]</h3>" + table_html(pd.DataFrame(
+            [{"stage": k, "seconds": v} for k, v in timing.items()]), left=("stage",)))
+    if s.get("preprocessing"):
+        parts.append("<h3>Preprocessing</h3>" + _kv(_flatten(s["preprocessing"])))
+    if s.get("autotune"):
+        parts.append("<h3>Autotuned parameters</h3>" + _kv(_flatten(s["autotune"])))
+    ev = s.get("evaluation") or {}
     if ev:
-        rows = []
-        keys = ["rms_h_m", "max_h_m", "non_outage_rms_h_m", "end_h_err_m_mean",
-                "max_h_err_m_mean", "rms_h_err_m_mean"]
-        for name, e in ev.items():
-            rows.append({"solution": name, **{k: e.get(k, np.nan) for k in keys}})
-        parts.append("<h2>Accuracy against the reference [m]</h2>" + _table(pd.DataFrame(rows)))
+        rows = [{"solution": name, **{h: e.get(k) for k, h in ACCURACY_COLUMNS.items()}}
+                for name, e in ev.items()]
+        parts.append("<h2 id='accuracy'>Accuracy against the reference</h2>"
+                     + table_html(pd.DataFrame(rows), left=("solution",)))
         for name, e in result.evaluation.items():
             if len(e["outages"]):
-                parts.append(f"<h3>Outages, {name}</h3>" + _table(e["outages"]))
-    figs = [("Track", track_figure), ("Position errors", error_figure),
-            ("Drift inside outages", drift_figure), ("IMU biases", bias_figure),
-            ("Innovations", innovation_figure)]
-    for title, fn in figs:
-        fig = fn(result)
-        if fig is None:
-            continue
-        parts.append(f"<h2>{title}</h2><figure><img alt='{title}' "
-                     f"src='data:image/png;base64,{_png(fig)}'/></figure>")
-    style = ("body{font-family:sans-serif;max-width:1300px;margin:2em auto;color:#222}"
-             "table{border-collapse:collapse;margin:0.5em 0}td,th{padding:3px 8px;"
-             "border-bottom:1px solid #ddd;text-align:left}img{max-width:100%}")
-    return ("<!DOCTYPE html><html><head><meta charset='utf-8'><title>insgnss report</title>"
-            f"<style>{style}</style></head><body>" + "\n".join(parts) + "</body></html>\n")
+                o = e["outages"].copy()
+                o["outage"] = o["outage"] + 1
+                o = o.rename(columns=OUTAGE_COLUMNS)
+                parts.append(f"<h3>Outages, {name}</h3>" + table_html(o))
+    exc = excursion_table(data)
+    if len(exc):
+        parts.append("<h2 id='consistency'>Consistency</h2><p class='note'>Epochs where the "
+                     "error leaves the filter's +-3 sigma (a consistent Gaussian filter: "
+                     "0.27 %).</p>" + table_html(exc, left=("solution", "quantity", "component")))
+    nees = [{"solution": sd.name, **{f"mean NEES {q} (3 dof)": float(np.nanmean(sd.nees[q]))
+                                     for q in NEES_NAMES if q in sd.nees.columns}}
+            for sd in data.solutions.values() if sd.nees is not None]
+    if nees:
+        parts.append("<h3>Mean NEES (expected 3)</h3>" + table_html(pd.DataFrame(nees),
+                                                                     left=("solution",)))
+    inn = data.innovations
+    if inn is not None and "nis" in inn.columns:
+        g = inn.groupby("type", sort=False)
+        nis = pd.DataFrame({"measurement": list(g.groups), "dof": g["dof"].median().to_numpy(),
+                            "mean NIS": g["nis"].mean().to_numpy()})
+        parts.append("<h3>Mean NIS (expected: dof)</h3>" + table_html(nis,
+                                                                     left=("measurement",)))
+    if data.notes:
+        parts.append("<h3>Not shown</h3>" + "".join(f"<p class='note'>{html.escape(n)}</p>"
+                                                    for n in data.notes))
+    return "\n".join(p for p in parts if p)
 
 
-def write_report(result, path: str | os.PathLike):
-    """Write the HTML report atomically."""
-    return atomic_write_text(path, render_report(result))
+def _page(title: str, body: str, head_extra: str = "") -> str:
+    return ("<!DOCTYPE html><html lang='en'><head><meta charset='utf-8'>"
+            f"<title>{html.escape(title)}</title><style>{STYLE}</style>{head_extra}</head>"
+            f"<body>{body}</body></html>\n")
+
+
+def render_report(result, data: ReportData | None = None, figures: list | None = None) -> str:
+    """The static report as an HTML string (``figures``: ``(spec, png bytes)`` pairs; drawn
+    here when not given)."""
+    from .plots import render, report_specs
+
+    data = build_report_data(result) if data is None else data
+    if figures is None:
+        figures = [(sp, _png_bytes(render(sp))) for sp in report_specs(data)]
+    title = f"insgnss report: {data.title}"
+    toc = " ".join(f"<a href='#{sp.key}'>{html.escape(sp.title)}</a>" for sp, _ in figures)
+    body = [f"<h1>{html.escape(title)}</h1>",
+            f"<nav><a href='{INTERACTIVE_NAME}'>interactive version (zoomable)</a> | "
+            f"figures: {toc}</nav>", summary_html(result, data)]
+    for sp, png in figures:
+        b64 = base64.b64encode(png).decode("ascii")
+        body.append(f"<h2 id='{sp.key}'>{html.escape(sp.title)}</h2><figure class='fig' "
+                    f"data-key='{sp.key}'><img alt='{html.escape(sp.title)}' "
+                    f"src='data:image/png;base64,{b64}'/><figcaption>{html.escape(sp.caption)}"
+                    "</figcaption></figure>")
+    body.append("<h2 id='job'>Resolved job</h2><details><summary>settings as run</summary><pre>"
+                + html.escape(_resolved_job(result)) + "</pre></details>")
+    return _page(title, "\n".join(body))
+
+
+def _png_bytes(fig) -> bytes:
+    buf = io.BytesIO()
+    fig.savefig(buf, format="png", dpi=PNG_DPI)
+    return buf.getvalue()
+
+
+def check_figure_formats(formats) -> list[str]:
+    """Validated ``[outputs] figures`` list (lower case, each one of :data:`FIGURE_FORMATS`)."""
+    from .errors import ConfigError
+
+    out = []
+    for f in formats or ():
+        if not isinstance(f, str) or f.lower() not in FIGURE_FORMATS:
+            raise ConfigError("unknown figure format", column="outputs.figures",
+                              expected=f"some of {list(FIGURE_FORMATS)}", found=repr(f))
+        out.append(f.lower())
+    return list(dict.fromkeys(out))
+
+
+def write_report(result, path: str | os.PathLike, *, dest=None, figures=()) -> list[str]:
+    """Write ``report.html`` at ``path``, the interactive page and, for each format in
+    ``figures``, every figure as ``fig_<key>.<ext>``; ``dest(name)`` gives the path of another
+    output (an :class:`~insgnss.io.outputset.OutputSet` staging path; default beside ``path``).
+    Returns the names written besides ``path``."""
+    from .plots import render, report_specs
+    from .report_interactive import render_interactive
+
+    formats = check_figure_formats(figures)
+    path = Path(path)
+    dest = dest or (lambda name: path.parent / name)
+    data = build_report_data(result)
+    specs = report_specs(data)
+    written = []
+    pngs = []
+    for sp in specs:
+        fig = render(sp)
+        png = _png_bytes(fig)
+        pngs.append((sp, png))
+        fig.set_layout_engine(None)  # laid out once; further formats only draw
+        for ext in formats:
+            name = figure_file(sp.key, ext)
+            if ext == "png":
+                atomic_write(dest(name), lambda p, b=png: Path(p).write_bytes(b))
+            else:
+                atomic_write(dest(name), lambda p, f=fig, e=ext: f.savefig(p, format=e))
+            written.append(name)
+    atomic_write_text(path, render_report(result, data, pngs))
+    atomic_write_text(dest(INTERACTIVE_NAME), render_interactive(result, data, specs))
+    written.append(INTERACTIVE_NAME)
+    return written

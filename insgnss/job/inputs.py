@@ -31,6 +31,7 @@ class Inputs:
     lever_arm: np.ndarray = field(default_factory=lambda: np.zeros(3))
     imu_model: ImuErrorModel | None = None
     truth: pd.DataFrame | None = None
+    sensor_truth: pd.DataFrame | None = None  #: simulated IMU errors (SimulationResult.sensor_errors)
     source: str = "files"
     seed: int | None = None
 
@@ -163,7 +164,8 @@ def load_inputs(job: Job, seed: int | None = None) -> Inputs:
         sim_grade = job.simulation.get("imu", {}).get("grade")
         return Inputs(imu=sim.imu, gnss=sim.gnss, odometer=sim.odometer,
                       reference=truth.iloc[::step], reference_point="imu",
-                      lever_arm=sim_la, truth=truth, source="simulation", seed=sim.seed,
+                      lever_arm=sim_la, truth=truth, sensor_truth=sim.sensor_errors(),
+                      source="simulation", seed=sim.seed,
                       imu_model=imu_model(job, grade(sim_grade) if sim_grade else None))
     imu = read_imu(job)
     gnss = read_gnss(job)

@@ -10,6 +10,7 @@ from pathlib import Path
 from ..evaluate import move_point
 from ..io.native import atomic_write, atomic_write_text, jsonable, write_table
 from ..io.outputset import MARKER, OutputSet
+from ..report_data import REPORT_FILES
 from .result import JobResult
 from .summary import incomplete_reason
 
@@ -19,7 +20,7 @@ OUTPUT_NAMES = tuple(
     [f"{t}{ext}" for t in ("forward", "smoothed")
      for ext in (".csv", ".nav", ".kml", ".geojson", "_eval.csv")]
     + ["innovations.csv", "rejected.csv", "outages_forward.csv", "outages_smoothed.csv",
-       "summary.json", "report.html"])
+       "summary.json", "report.html"] + list(REPORT_FILES))
 
 
 def write_outputs(result: JobResult, out_dir: str | Path | None = None) -> dict[str, Path]:
@@ -75,15 +76,15 @@ def write_outputs(result: JobResult, out_dir: str | Path | None = None) -> dict[
                 table = ev["outages"]
                 atomic_write(dest(f"outages_{name}.csv"),
                              lambda p, table=table: table.to_csv(p, index=False))
-        summary = dict(result.summary)
-        summary["files"] = sorted(outs.names + ["summary.json"]
-                                  + (["report.html"] if job["outputs"]["report"] else [])
-                                  + ([] if complete else [MARKER]))
-        atomic_write_text(dest("summary.json"), json.dumps(jsonable(summary), indent=2) + "\n")
-        if job["outputs"]["report"]:
+        if job["outputs"]["report"]:  # report.html, report_interactive.html, fig_* files
             from ..report import write_report
 
-            write_report(result, dest("report.html"))
+            write_report(result, dest("report.html"), dest=dest,
+                         figures=job["outputs"].get("figures", ()))
+        summary = dict(result.summary)
+        summary["files"] = sorted(outs.names + ["summary.json"]
+                                  + ([] if complete else [MARKER]))
+        atomic_write_text(dest("summary.json"), json.dumps(jsonable(summary), indent=2) + "\n")
         reason = incomplete_reason({**summary, "complete": complete})
         return outs.commit(complete=complete, reason=reason)
 

@@ -355,6 +355,20 @@ class SimulationResult:
     def seed(self) -> int:
         return int(self.metadata["seed"])
 
+    def sensor_errors(self) -> pd.DataFrame | None:
+        """The simulated IMU errors the filter estimates, as the filter names them: the bias
+        series ``gyro_bias_x .. accel_bias_z`` [rad/s, m/s^2] and the drawn (constant) scale
+        factors ``gyro_scale_x .. accel_scale_z`` [-]; None for ideal sensors."""
+        if self.imu_bias is None:
+            return None
+        out = self.imu_bias.copy()
+        drawn = (self.metadata.get("imu") or {}).get("drawn") or {}
+        for key in ("gyro_scale", "accel_scale"):
+            if key in drawn:
+                for j, ax in enumerate("xyz"):
+                    out[f"{key}_{ax}"] = float(np.asarray(drawn[key], float)[j])
+        return out
+
     def tables(self) -> dict[str, pd.DataFrame]:
         """The tables that are written, by file name (``imu_bias`` decimated to <= 10 Hz)."""
         out = {"truth.csv": self.truth, "imu.csv": self.imu}
