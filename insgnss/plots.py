@@ -53,13 +53,14 @@ WIDTH = 7.16  #: figure width [in] (two-column paper page)
 
 # --- decimation -----------------------------------------------------------------------------
 def minmax_indices(*ys: np.ndarray, n: int = DISPLAY_POINTS) -> np.ndarray:
-    """Sorted indices keeping the minimum and maximum of each of ``n // 2`` equal buckets of
-    every series in ``ys`` (same length), and the first and last sample; all indices when the
-    series are no longer than ``n``. NaN never wins a bucket unless the bucket is all NaN."""
+    """Sorted indices keeping the minimum and maximum of every series in ``ys`` (same length)
+    in each of ``n // (2 len(ys))`` equal buckets, and the first and last sample: at most
+    ``n + 2`` indices; all indices when the series are no longer than ``n``. NaN never wins a
+    bucket unless the bucket is all NaN."""
     m = len(ys[0]) if ys else 0
     if m <= n:
         return np.arange(m)
-    nb = max(n // 2, 1)
+    nb = max(n // (2 * len(ys)), 1)
     size = int(np.ceil(m / nb))
     pad = nb * size - m
     keep = [np.array([0, m - 1])]
@@ -296,10 +297,15 @@ def sensor_spec(data) -> FigureSpec | None:
     and the simulated truth."""
     from .report_data import SENSOR_BLOCKS
 
+    def has(sol, cols):
+        return all(c in sol.table.columns for c in cols)
+
     blocks = [(k, v) for k, v in SENSOR_BLOCKS.items()
-              if all(c in data.best.table.columns for c in v[0])]
+              if any(has(s, v[0]) for s in data.solutions.values())]
     if not blocks:
         return None
+    # the solution whose band is drawn: the smoothed one unless only the forward has the states
+    main = data.best if has(data.best, blocks[0][1][0]) else data.solutions["forward"]
     t0 = _t0(data)
     panels = []
     truth = data.sensor_truth
@@ -309,9 +315,11 @@ def sensor_spec(data) -> FigureSpec | None:
                       shade=_shade(data, t0))
             for s in data.solutions.values():
                 tab = s.table
+                if c not in tab.columns:
+                    continue
                 t = tab.index.to_numpy(float) - t0
                 y = tab[c].to_numpy(float) * scale
-                if s is data.best and f"{c}_std" in tab.columns:
+                if s is main and f"{c}_std" in tab.columns:
                     sd = tab[f"{c}_std"].to_numpy(float) * scale
                     td, lo, hi = decimate(t, y - 3 * sd, y + 3 * sd)
                     p.traces.append(Trace("band", x=td, lo=lo, hi=hi,
@@ -319,8 +327,8 @@ def sensor_spec(data) -> FigureSpec | None:
                                           label=f"{s.name} +-3 sigma"))
                 td, yd = decimate(t, y)
                 p.traces.append(Trace("line", x=td, y=yd, color=SOLUTION_COLORS[s.name],
-                                      width=1.2 if s is data.best else 0.7,
-                                      dash="solid" if s is data.best else "dashed",
+                                      width=1.2 if s is main else 0.7,
+                                      dash="solid" if s is main else "dashed",
                                       label=s.name))
             span = [v for tr in p.traces if tr.kind == "band" for v in (tr.lo, tr.hi)]
             if truth is not None and c in truth.columns:
@@ -340,9 +348,9 @@ def sensor_spec(data) -> FigureSpec | None:
     for p in panels[-3:]:
         p.xlabel = _tlabel(t0)
     names = ", ".join(k.replace("_", " ") for k, _ in blocks)
-    return FigureSpec("sensor_errors", "Estimated sensor errors",
+    return FigureSpec("sensor_errors", "Estimated IMU biases and scale factors",
                       f"Estimated {names} per body axis (x right, y forward, z up): "
-                      f"{data.best.name} solution with its +-3 sigma band, the other solution "
+                      f"{main.name} solution with its +-3 sigma band, the other solution "
                       "dashed" + (", the simulated truth dotted" if truth is not None else "")
                       + "; outages shaded.", panels, rows=len(blocks), cols=3, row_height=1.7)
 

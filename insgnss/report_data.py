@@ -358,10 +358,11 @@ def build_report_data(result) -> ReportData:
         notes.append("The reference measures the antenna and the lever arm is not zero: "
                      "velocity errors are not formed (the antenna velocity needs the body rate).")
     if ref is not None and kinds:
-        missing = [q for q in ("velocity", "attitude") if q not in kinds]
-        if missing and not notes:
-            notes.append(f"The reference has no {' or '.join(missing)}: only "
-                         f"{', '.join(kinds)} errors are shown.")
+        missing = [q for q in ("velocity", "attitude") if q not in _reference_kinds(ref)]
+        if missing:
+            notes.append(f"The reference has no {' or '.join(missing)}: "
+                         f"{' and '.join(missing)} are shown by the filter's sigmas and the "
+                         "forward-minus-smoothed difference.")
     for name in ("forward", "smoothed"):
         tab = getattr(f, name, None)
         if tab is None or not len(tab):

@@ -1,0 +1,254 @@
+"""Report (issue 18): every figure for the demo, the real drive and a foot job; summary tables in
+both forms of the measurement counts; the INCOMPLETE banner; figure files; decimation."""
+
+from __future__ import annotations
+
+import importlib.util
+import json
+
+import numpy as np
+import pandas as pd
+import pytest
+from report_helpers import EXPECTED, REPO, figure_keys, set_outputs
+
+from insgnss.config import load_job, load_job_dict
+from insgnss.errors import ConfigError
+from insgnss.pipeline import load_inputs, run_job, write_outputs
+from insgnss.plots import (
+    DISPLAY_POINTS,
+    REPORT_FIGURES,
+    decimate,
+    innovation_spec,
+    minmax_indices,
+    nis_spec,
+    track_spec,
+)
+from insgnss.report import fmt, measurement_counts
+from insgnss.report_data import (
+    COMPONENTS,
+    FIGURE_KEYS,
+    INTERACTIVE_NAME,
+    build_report_data,
+    figure_file,
+)
+
+
+# --- shared runs ------------------------------------------------------------------------------
+@pytest.fixture(scope="module")
+def demo(tmp_path_factory):
+    from insgnss.commands.demo import demo_job_path
+
+    job = set_outputs(load_job(demo_job_path()), figures=["png", "pdf", "svg"])
+    res = run_job(job, progress=False)
+    out = tmp_path_factory.mktemp("demo")
+    return res, out, write_outputs(res, out)
+
+
+@pytest.fixture(scope="module")
+def drive(tmp_path_factory):
+    from conftest import shared_data
+
+    shared_data("gnss-imu-rtklibexplorer", "drive_0708")
+    job = set_outputs(load_job(REPO / "scenarios" / "drive_0708.toml"), figures=["svg"])
+    res = run_job(job, progress=False)
+    out = tmp_path_factory.mktemp("drive")
+    return res, out, write_outputs(res, out)
+
+
+@pytest.fixture(scope="module")
+def foot(tmp_path_factory):
+    from conftest import shared_data
+
+    trial = shared_data("pyshoe-vicon", "2017-11-22-11-22-03.mat")
+    spec = importlib.util.spec_from_file_location("pyshoe_convert",
+                                                  REPO / "scenarios" / "pyshoe" / "convert.py")
+    convert = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(convert)
+    d = tmp_path_factory.mktemp("foot")
+    imu_csv, _ = convert.write_trial(trial, d)
+    (d / "foot.toml").write_text((REPO / "scenarios" / "foot_mounted.toml").read_text()
+                                 + f'\n[inputs.imu]\nformat = "native"\npath = "{imu_csv.name}"\n'
+                                 '\n[outputs]\ndir = "out"\nformats = ["csv"]\n')
+    job = load_job(d / "foot.toml")
+    res = run_job(job, progress=False)
+    return res, d / "out", write_outputs(res, d / "out")
+
+
+def _check_pages(out, expected: set[str]):
+    static = (out / "report.html").read_text()
+    inter = (out / INTERACTIVE_NAME).read_text()
+    assert figure_keys(static) == expected
+    assert figure_keys(inter) == expected
+    assert "<script" not in static  # the static page opens without scripts
+    assert static.count("data:image/png;base64,") == len(expected)
+    for key in expected:
+        assert f"id='plot-{key}'" in inter
+    # plotly.js embedded once, the page needs no network
+    assert inter.count("plotly.js v") == 1 and "<script src" not in inter
+    # readable summary: no raw Python dicts, no NaN cells
+    assert "{'" not in static and ">nan<" not in static.lower()
+    assert "<th>offered</th>" in static.replace("<th class=''>", "<th>")
+    return static, inter
+
+
+def test_demo_report_has_every_figure(demo):
+    res, out, paths = demo
+    static, inter = _check_pages(out, EXPECTED["demo"])
+    assert "INCOMPLETE" not in static
+    # figure files beside the report in every requested format, listed in the output set
+    for key in EXPECTED["demo"]:
+        assert (out / figure_file(key, "pdf")).read_bytes()[:4] == b"%PDF"
+        assert b"<svg" in (out / figure_file(key, "svg")).read_bytes()[:2000]
+        assert (out / figure_file(key, "png")).read_bytes()[:4] == b"\x89PNG"
+        assert figure_file(key, "svg") in paths
+    summary = json.loads((out / "summary.json").read_text())
+    assert "report_interactive.html" in summary["files"] and "fig_nees.pdf" in summary["files"]
+    # named innovation components in the interactive figures (not "component 0")
+    for name in ("east", "north", "up", "x (right)", "right"):
+        assert f'"name":"{name}"' in inter
+    assert "component 0" not in inter
+    assert "insgnss version" in static and "Resolved job" in static
+
+
+def test_drive_report_position_reference_only(drive):
+    res, out, _ = drive
+    static, _ = _check_pages(out, EXPECTED["drive"])
+    # RTK positions and velocities at the antenna, no attitude: velocity errors would need the
+    # lever-arm velocity (body rate), so velocity and attitude come as sigmas and differences
+    assert "The reference has no attitude" in static
+    assert "The reference measures the antenna" in static
+    assert (out / figure_file("nees", "svg")).exists()
+    assert not (out / figure_file("nees", "pdf")).exists()
+    data = build_report_data(res)
+    assert data.reference_kinds == ("position",)
+    # NEES only where the reference has the quantity
+    assert list(data.solutions["forward"].nees.columns) == ["position"]
+
+
+def test_foot_report_without_reference(foot):
+    res, out, _ = foot
+    static, _ = _check_pages(out, EXPECTED["foot"])
+    assert "No reference" in static
+    # the foot filter's innovations are named (zupt east/north/up, zaru x/y/z)
+    spec = innovation_spec(build_report_data(res))
+    names = {t.label for p in spec.panels for t in p.traces if t.label}
+    assert {"zupt east", "zupt north", "zupt up", "zaru x"} <= names
+
+
+def test_incomplete_run_shows_the_banner(tmp_path):
+    """A run stopped by the filter health check (NaN in the IMU, as in
+    test_robustness_health.py) writes both pages with the banner and the stop reason on top."""
+    from robustness_helpers import small_job
+
+    job = small_job()
+    set_outputs(job, report=True)
+    inputs = load_inputs(job)
+    imu = inputs.imu.copy()
+    imu.iloc[int(np.searchsorted(imu.index, imu.index[0] + 50.0)), 0] = np.nan
+    inputs.imu = imu
+    res = run_job(job, inputs=inputs, progress=False)
+    assert not res.summary["complete"]
+    write_outputs(res, tmp_path)
+    for name in ("report.html", INTERACTIVE_NAME):
+        page = (tmp_path / name).read_text()
+        body = page[page.index("<body>"):]
+        assert body.index("id='incomplete'") < body.index("id='summary'")
+        assert "INCOMPLETE" in body and "non-finite" in body
+        assert f"t = {fmt(res.summary['stopped_at'])} s" in body
+    assert (tmp_path / "INCOMPLETE").exists()
+
+
+# --- pieces -----------------------------------------------------------------------------------
+def test_measurement_counts_old_and_new_forms():
+    old = {"measurements": {"gnss_pos": 10, "zupt": 5}, "rejected": {"gnss_pos": 2}}
+    inn = pd.DataFrame({"type": ["gnss_pos"] * 10 + ["zupt"] * 5,
+                        "accepted": [True] * 8 + [False] * 2 + [True] * 5,
+                        "recovered": [False] * 9 + [True] + [False] * 5})
+    t = measurement_counts(old, inn).set_index("measurement")
+    assert t.loc["gnss_pos"].tolist() == [10, 8, 2, 1] and t.loc["zupt"].tolist() == [5, 5, 0, 0]
+    new = {"measurements": {"gnss_pos": {"offered": 10, "applied": 7, "rejected": 3,
+                                         "recovered": 1}}}
+    t = measurement_counts(new).set_index("measurement")
+    assert t.loc["gnss_pos"].tolist() == [10, 7, 3, 1]
+    assert fmt(float("nan")) == "-" and fmt({"a": 1.23456}) == "a: 1.235" and fmt(None) == "-"
+
+
+def test_summary_shows_version_resolved_job_and_autotune(demo):
+    from insgnss.report import render_report
+
+    res, _, _ = demo
+    s = dict(res.summary)
+    res.summary = {**s, "version": "9.9.9", "job_resolved": {"filter": {"smoother": True}},
+                   "autotune": {"gyro_arw_deg_sqrt_h": 0.31, "converged": True}}
+    try:
+        page = render_report(res)
+    finally:
+        res.summary = s
+    assert "9.9.9" in page and "Autotuned parameters" in page and "gyro_arw_deg_sqrt_h" in page
+    assert "&quot;smoother&quot;: true" in page
+
+
+def test_rejected_points_drawn_at_their_nis_and_normalised_innovation(demo):
+    res, _, _ = demo
+    data = build_report_data(res)
+    inn = data.innovations
+    rej = inn[~inn["accepted"].astype(bool)]
+    assert len(rej) >= 1
+    t0 = float(data.solutions["forward"].table.index[0])
+    spec = nis_spec(data)
+    crosses = [t for p in spec.panels for t in p.traces if t.label == "rejected"]
+    got = np.sort(np.concatenate([t.y for t in crosses]))
+    assert np.allclose(got, np.sort(rej["nis"].to_numpy(float)))
+    assert np.all(got > 0)  # not at y = 0 (issue 18)
+    spec = innovation_spec(data)
+    ty = rej["type"].iloc[0]
+    panel = next(p for p in spec.panels if p.title.startswith(f"{ty}:"))
+    xs = [t for t in panel.traces if t.color == "#d62728" and t.kind == "points"]
+    want = rej[rej["type"] == ty]
+    assert np.allclose(xs[0].y, want["innov_0"] / want["innov_std_0"])
+    assert np.allclose(xs[0].x, want["time"] - t0)
+    names = [t.label for t in panel.traces if t.kind == "points" and t.color != "#d62728"]
+    assert names == list(COMPONENTS[ty][0])
+
+
+def test_minmax_decimation_keeps_extremes():
+    rng = np.random.default_rng(0)
+    n = 720_000  # 1 h at 200 Hz
+    y = rng.normal(size=n)
+    y[123_457] = 50.0
+    y[654_321] = -60.0
+    i = minmax_indices(y)
+    assert i.size <= DISPLAY_POINTS + 2 and i[0] == 0 and i[-1] == n - 1
+    assert 123_457 in i and 654_321 in i and np.all(np.diff(i) > 0)
+    x, yd = decimate(np.arange(n), y)
+    assert yd.max() == 50.0 and yd.min() == -60.0
+    # every bucket's min and max survive
+    b = n // (DISPLAY_POINTS // 2) + 1
+    assert np.isclose(yd.max(), y[: b * (DISPLAY_POINTS // 2)].max())
+    assert minmax_indices(np.arange(10.0)).tolist() == list(range(10))
+
+
+def test_track_of_a_long_log_is_decimated(demo):
+    """A 1 h / 200 Hz track is drawn with a few thousand points, not 720k."""
+    from insgnss.report_data import ReportData, SolutionData
+
+    res, _, _ = demo
+    n = 720_000
+    t = np.arange(n) / 200.0
+    lat0, lon0 = np.radians(51.0), np.radians(-114.0)
+    tab = pd.DataFrame({"lat": lat0 + 1e-6 * np.sin(t / 300), "lon": lon0 + 1e-6 * t / 36,
+                        "height": np.zeros(n), "east_std": np.ones(n), "north_std": np.ones(n)},
+                       index=pd.Index(t, name="time"))
+    data = ReportData("long", {}, [], {"forward": SolutionData("forward", tab)},
+                      (lat0, lon0, 0.0))
+    sizes = [len(tr.x) for p in track_spec(data).panels for tr in p.traces]
+    assert max(sizes) <= DISPLAY_POINTS + 2
+
+
+def test_figure_keys_and_config():
+    assert tuple(k for k, _, _ in REPORT_FIGURES) == FIGURE_KEYS
+    job = load_job_dict({"outputs": {"figures": ["png", "pdf"]}})
+    assert job["outputs"]["figures"] == ["png", "pdf"]
+    assert load_job_dict({})["outputs"]["figures"] == []
+    with pytest.raises(ConfigError, match="outputs.figures"):
+        load_job_dict({"outputs": {"figures": ["jpg"]}})
