@@ -35,6 +35,7 @@ from matplotlib.figure import Figure  # noqa: E402
 
 from .earth import geodetic_to_enu  # noqa: E402
 from .io.native import atomic_write  # noqa: E402
+from .report_data import time_origin  # noqa: E402
 
 DISPLAY_POINTS = 4000  #: points kept per series for display (min/max of DISPLAY_POINTS/2 buckets)
 SOLUTION_COLORS = {"forward": "#1f77b4", "smoothed": "#d62728", "reference": "#444444"}
@@ -146,10 +147,6 @@ def local_enu(traj: pd.DataFrame, origin: tuple[float, float, float] | None = No
     return np.column_stack(geodetic_to_enu(lat, lon, h, *o))
 
 
-def _t0(data) -> float:
-    return float(data.solutions["forward"].table.index[0])
-
-
 def _tlabel(t0: float) -> str:
     return f"time - {t0:.2f} s [s]" if abs(t0) > 1e-9 else "time [s]"
 
@@ -169,7 +166,7 @@ def error_spec(data, quantity: str) -> FigureSpec | None:
             if s.errors is not None and all(c in s.errors.columns for c in cols)]
     if not sols:
         return None
-    t0 = _t0(data)
+    t0 = time_origin(data)
     panels = []
     for c, sc in zip(cols, stds, strict=True):
         for s in sols:
@@ -208,7 +205,7 @@ def sigma_spec(data, quantity: str) -> FigureSpec | None:
     from .report_data import LABELS, QUANTITIES
 
     cols, stds, unit, scale = QUANTITIES[quantity]
-    t0 = _t0(data)
+    t0 = time_origin(data)
     panels = []
     for c, sc in zip(cols, stds, strict=True):
         p = Panel(ylabel=f"3 sigma {LABELS[c]} [{unit}]", shade=_shade(data, t0),
@@ -243,7 +240,7 @@ def difference_spec(data, quantity: str) -> FigureSpec | None:
     f = data.solutions["forward"].table
     s = sample_at(data.solutions["smoothed"].table, d.index.to_numpy(float))
     f = f.loc[s.index] if len(f) != len(s) else f
-    t0 = _t0(data)
+    t0 = time_origin(data)
     t = d.index.to_numpy(float) - t0
     panels = []
     for c, sc in zip(cols, stds, strict=True):
@@ -268,7 +265,7 @@ def difference_spec(data, quantity: str) -> FigureSpec | None:
 
 def heading_spec(data) -> FigureSpec | None:
     """Heading (0-360 deg, clockwise from north) and its 3 sigma over time."""
-    t0 = _t0(data)
+    t0 = time_origin(data)
     top = Panel(title="heading", ylabel="heading [deg]", shade=_shade(data, t0), ylim=(0, 360))
     bot = Panel(ylabel="3 sigma heading [deg]", xlabel=_tlabel(t0), shade=_shade(data, t0))
     ref = data.reference
@@ -306,7 +303,7 @@ def sensor_spec(data) -> FigureSpec | None:
         return None
     # the solution whose band is drawn: the smoothed one unless only the forward has the states
     main = data.best if has(data.best, blocks[0][1][0]) else data.solutions["forward"]
-    t0 = _t0(data)
+    t0 = time_origin(data)
     panels = []
     truth = data.sensor_truth
     for key, (cols, unit, scale) in blocks:
@@ -363,7 +360,7 @@ def drift_spec(data) -> FigureSpec | None:
         return None
     sols = list(dict.fromkeys(d["solution"]))
     panels = []
-    cmap = plt.get_cmap("tab10")
+    cmap = plt.get_cmap("tab10" if len(data.windows) <= 10 else "tab20")
     for row in ("horizontal", "percent"):
         for name in sols:
             ds = d[d["solution"] == name]
@@ -374,7 +371,7 @@ def drift_spec(data) -> FigureSpec | None:
                       xlabel="time since outage start [s]" if row == "percent" else "",
                       legend="right" if name == sols[-1] else "none")
             for w, g in ds.groupby("outage"):
-                col = matplotlib.colors.to_hex(cmap(int(w) % 10))
+                col = matplotlib.colors.to_hex(cmap(int(w) % cmap.N))
                 t = g["t_rel"].to_numpy(float)
                 dist = float(np.nanmax(g["distance"].to_numpy(float)))
                 if row == "horizontal":
@@ -383,7 +380,7 @@ def drift_spec(data) -> FigureSpec | None:
                                           label=f"outage {int(w) + 1} ({dist:.0f} m)"))
                     p.traces.append(Trace("line", x=t, y=g["sigma3"].to_numpy(float), color=col,
                                           dash="dashed", width=0.8,
-                                          label="predicted 3 sigma (dashed)"
+                                          label="3 sigma, predicted"
                                           if w == ds["outage"].min() else None))
                 else:
                     p.traces.append(Trace("line", x=t, y=g["percent"].to_numpy(float),
@@ -402,42 +399,39 @@ def drift_spec(data) -> FigureSpec | None:
 def innovation_spec(data) -> FigureSpec | None:
     """Normalised innovations (innovation / predicted sigma) per measurement type and named
     component; rejected measurements as crosses at their normalised value."""
-    from .report_data import COMPONENTS, innovation_components
+    from .report_data import innovation_groups
 
     inn = data.innovations
     if inn is None:
         return None
-    t0 = _t0(data)
+    t0 = time_origin(data)
     panels = []
     for ty in dict.fromkeys(inn["type"]):
         d = inn[inn["type"] == ty]
-        comps = innovation_components(d, ty)
-        if not comps:
-            continue
         t = d["time"].to_numpy(float) - t0
         acc = d["accepted"].to_numpy(bool) if "accepted" in d.columns else np.ones(len(d), bool)
-        normalised = all(s is not None for _, _, s in comps)
-        _, unit, scale = COMPONENTS.get(ty, ((), "", 1.0))
-        p = Panel(title=f"{ty}: " + ("innovation / predicted sigma" if normalised else
-                                     "innovation"),
-                  ylabel="normalised" if normalised else f"[{unit}]" if unit else "",
-                  shade=_shade(data, t0), legend="right")
-        if normalised:
-            p.traces += [Trace("hline", value=v, color="k", dash="dashed", width=0.6,
-                               label="+-3" if v > 0 else None) for v in (3.0, -3.0)]
-        for j, (col, name, std) in enumerate(comps):
-            v = d[col].to_numpy(float)
-            v = v / d[std].to_numpy(float) if std else v * scale
-            td, yd = decimate(t[acc], v[acc])
-            p.traces.append(Trace("points", x=td, y=yd, color=AXIS_COLORS[j % 3], size=2,
-                                  label=name))
-            if np.any(~acc):
-                p.traces.append(Trace("points", x=t[~acc], y=v[~acc], color=REJECT_COLOR,
-                                      marker="x", size=5,
-                                      label=f"rejected ({int((~acc).sum())})" if j == 0
-                                      else None))
-        p.note = f"{len(d)} evaluated, {int((~acc).sum())} rejected"
-        panels.append(p)
+        for title, unit, scale, comps in innovation_groups(d, ty):
+            normalised = all(s is not None for _, _, s in comps)
+            p = Panel(title=f"{title}: " + ("innovation / predicted sigma" if normalised else
+                                            "innovation"),
+                      ylabel="normalised" if normalised else f"[{unit}]" if unit else "",
+                      shade=_shade(data, t0), legend="right")
+            if normalised:
+                p.traces += [Trace("hline", value=v, color="k", dash="dashed", width=0.6,
+                                   label="+-3" if v > 0 else None) for v in (3.0, -3.0)]
+            for j, (col, name, std) in enumerate(comps):
+                v = d[col].to_numpy(float)
+                v = v / d[std].to_numpy(float) if std else v * scale
+                td, yd = decimate(t[acc], v[acc])
+                p.traces.append(Trace("points", x=td, y=yd, color=AXIS_COLORS[j % 3], size=2,
+                                      label=name))
+                if np.any(~acc):
+                    p.traces.append(Trace("points", x=t[~acc], y=v[~acc], color=REJECT_COLOR,
+                                          marker="x", size=5,
+                                          label=f"rejected ({int((~acc).sum())})" if j == 0
+                                          else None))
+            p.note = f"{len(d)} evaluated, {int((~acc).sum())} rejected"
+            panels.append(p)
     if not panels:
         return None
     panels[-1].xlabel = _tlabel(t0)
@@ -510,7 +504,7 @@ def nis_spec(data) -> FigureSpec | None:
     inn = data.innovations
     if inn is None or "nis" not in inn.columns:
         return None
-    t0 = _t0(data)
+    t0 = time_origin(data)
     panels = []
     for ty in dict.fromkeys(inn["type"]):
         d = inn[inn["type"] == ty]
@@ -548,7 +542,7 @@ def nees_spec(data) -> FigureSpec | None:
     if not sols:
         return None
     names = [q for q in NEES_NAMES if any(q in s.nees.columns for s in sols)]
-    t0 = _t0(data)
+    t0 = time_origin(data)
     panels = []
     for q in names:
         for s in sols:
@@ -704,7 +698,7 @@ def _draw(ax, p: Panel, fig):
             lc.set_array(0.5 * (c[:-1] + c[1:]))
             ax.add_collection(lc)
             ax.autoscale_view()
-            cb = fig.colorbar(lc, ax=ax, shrink=0.8, pad=0.02, fraction=0.05, extend="max")
+            cb = fig.colorbar(lc, ax=ax, shrink=0.8, pad=0.02, fraction=0.04, extend="max")
             cb.set_label(p.colorbar or "")
             ax.plot([], [], color=matplotlib.colormaps["viridis"](0.6), lw=tr.width,
                     label=tr.label)
@@ -738,7 +732,8 @@ def _draw(ax, p: Panel, fig):
 def _margins(spec: FigureSpec, n_legend: int) -> dict:
     """Fixed margins in inches (constrained layout costs more than the drawing itself)."""
     titled = any(p.title for p in spec.panels[spec.cols:])
-    right = 0.15 + (1.55 if any(p.legend == "right" for p in spec.panels) else 0.0)
+    right = 0.15 + (1.75 if any(p.legend == "right" for p in spec.panels) else 0.0) + \
+        (0.75 if any(p.colorbar for p in spec.panels) else 0.0)
     top = 0.25 + (0.22 * int(np.ceil(n_legend / 4)) if n_legend else 0.0) + \
         (0.22 if any(p.title for p in spec.panels[:spec.cols]) else 0.0)
     return {"left": 0.7, "right": right, "top": top, "bottom": 0.5,

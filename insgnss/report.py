@@ -38,6 +38,7 @@ from .report_data import (
     build_report_data,
     excursion_table,
     figure_file,
+    time_origin,
 )
 
 PNG_DPI = 150
@@ -74,6 +75,8 @@ def fmt(v) -> str:
         if not np.isfinite(v):
             return "-"
         a = abs(float(v))
+        if 1e6 <= a < 1e15:  # time stamps (GPS seconds), sample counts: all digits
+            return f"{v:.3f}".rstrip("0").rstrip(".")
         return f"{v:.4g}" if a == 0 or 1e-3 <= a < 1e6 else f"{v:.3e}"
     if isinstance(v, dict):
         return ", ".join(f"{k}: {fmt(x)}" for k, x in v.items()) or "-"
@@ -193,6 +196,14 @@ def _resolved_job(result) -> str:
     return json.dumps(jsonable(job), indent=2, default=str)
 
 
+def _outages_text(data: ReportData) -> str:
+    if not data.windows:
+        return "none"
+    t0 = time_origin(data)
+    spans = ", ".join(f"{fmt(a - t0)}-{fmt(b - t0)}" for a, b in data.windows)
+    return f"{len(data.windows)}: {spans} s" + (f" (after t0 = {fmt(t0)} s)" if t0 else "")
+
+
 def summary_html(result, data: ReportData) -> str:
     """Banner, summary tables, accuracy, outages, consistency and notes (shared by both
     pages)."""
@@ -204,8 +215,7 @@ def summary_html(result, data: ReportData) -> str:
            ("process", s.get("preset") or s.get("process_model")),
            ("complete", s.get("complete")), ("IMU samples", s.get("imu_samples")),
            ("IMU model", s.get("imu_model")),
-           ("GNSS outages", f"{len(data.windows)}: " + ", ".join(
-               f"{fmt(a)}-{fmt(b)} s" for a, b in data.windows) if data.windows else "none"),
+           ("GNSS outages", _outages_text(data)),
            ("reference", ", ".join(data.reference_kinds) if data.reference_kinds else "none")]
     parts.append("<h2 id='summary'>Summary</h2><h3>Run</h3>" + _kv(run))
     if ini:

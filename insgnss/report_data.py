@@ -290,6 +290,13 @@ def forward_minus_smoothed(data: ReportData) -> pd.DataFrame:
     return out
 
 
+def time_origin(data: ReportData) -> float:
+    """Time origin of the figures and tables: the first forward sample, unless the run already
+    starts near 0 s."""
+    t = float(data.solutions["forward"].table.index[0])
+    return 0.0 if abs(t) < 1.0 else t
+
+
 def excursions(errors: pd.DataFrame, col: str, std_col: str, k: float = 3.0) -> dict:
     """Where ``|error| > k sigma``: mask, fraction of epochs, first time, longest run [s]."""
     e = errors[col].to_numpy(float)
@@ -308,9 +315,10 @@ def excursions(errors: pd.DataFrame, col: str, std_col: str, k: float = 3.0) -> 
 
 
 def excursion_table(data: ReportData) -> pd.DataFrame:
-    """Per solution and error component: epochs compared, % outside +-3 sigma, first time and
-    longest excursion (expected for a consistent Gaussian filter: 0.27 %)."""
+    """Per solution and error component: epochs compared, % outside +-3 sigma, first time
+    (since :func:`time_origin`) and longest excursion (a consistent Gaussian filter: 0.27 %)."""
     rows = []
+    t0 = time_origin(data) if data.solutions else 0.0
     for name, s in data.solutions.items():
         if s.errors is None:
             continue
@@ -321,24 +329,32 @@ def excursion_table(data: ReportData) -> pd.DataFrame:
                     n = int(np.isfinite(s.errors[c].to_numpy(float)).sum())
                     rows.append({"solution": name, "quantity": q, "component": LABELS[c],
                                  "epochs": n, "outside 3 sigma [%]": 100 * x["fraction"],
-                                 "first outside [s]": x["first"],
+                                 "first outside [s]": x["first"] - t0,
                                  "longest excursion [s]": x["longest"]})
     return pd.DataFrame(rows)
 
 
-def innovation_components(inn: pd.DataFrame, mtype: str) -> list[tuple[str, str, str | None]]:
-    """``(column, component name, std column or None)`` of one measurement type's rows."""
-    names, _, _ = COMPONENTS.get(mtype, ((), "", 1.0))
-    out = []
+def innovation_groups(inn: pd.DataFrame, mtype: str) -> list[tuple]:
+    """Panels of one measurement type's innovations: ``(title, unit, scale, comps)`` with
+    ``comps`` a list of ``(column, component name, std column or None)``; the engine's log has
+    ``innov_k`` / ``innov_std_k``, the foot preset's ``zupt_e .. zaru_z`` (two panels)."""
+    names, unit, scale = COMPONENTS.get(mtype, ((), "", 1.0))
+    comps = []
     k = 0
     while f"innov_{k}" in inn.columns:
         std = f"innov_std_{k}" if f"innov_std_{k}" in inn.columns else None
-        out.append((f"innov_{k}", names[k] if k < len(names) else f"component {k}", std))
+        comps.append((f"innov_{k}", names[k] if k < len(names) else f"component {k}", std))
         k += 1
-    if not out:  # foot preset: <type>_<suffix> columns
-        for c in inn.columns:
-            if "_" in c and c.split("_")[0] in ("zupt", "zaru") and c.split("_")[-1] in FOOT_SUFFIX:
-                out.append((c, f"{c.split('_')[0]} {FOOT_SUFFIX[c.split('_')[-1]]}", None))
+    if comps:
+        return [(mtype, unit, scale, comps)]
+    out = []
+    for prefix in ("zupt", "zaru"):  # foot preset: <type>_<suffix> columns
+        cols = [c for c in inn.columns if c.startswith(prefix + "_")
+                and c.split("_")[-1] in FOOT_SUFFIX]
+        if cols:
+            _, u, sc = COMPONENTS[prefix]
+            out.append((prefix, u, sc, [(c, f"{prefix} {FOOT_SUFFIX[c.split('_')[-1]]}", None)
+                                        for c in cols]))
     return out
 
 

@@ -30,6 +30,7 @@ from insgnss.report_data import (
     INTERACTIVE_NAME,
     build_report_data,
     figure_file,
+    time_origin,
 )
 
 
@@ -194,7 +195,7 @@ def test_rejected_points_drawn_at_their_nis_and_normalised_innovation(demo):
     inn = data.innovations
     rej = inn[~inn["accepted"].astype(bool)]
     assert len(rej) >= 1
-    t0 = float(data.solutions["forward"].table.index[0])
+    t0 = time_origin(data)
     spec = nis_spec(data)
     crosses = [t for p in spec.panels for t in p.traces if t.label == "rejected"]
     got = np.sort(np.concatenate([t.y for t in crosses]))
@@ -252,3 +253,23 @@ def test_figure_keys_and_config():
     assert load_job_dict({})["outputs"]["figures"] == []
     with pytest.raises(ConfigError, match="outputs.figures"):
         load_job_dict({"outputs": {"figures": ["jpg"]}})
+
+
+def test_single_run_nees_uses_the_epoch_covariance(demo):
+    """NEES of the report = e' P(e|e)^-1 e with the forward filter's covariance at the same
+    epoch and the position error at that reference epoch (catches any epoch misalignment)."""
+    res, _, _ = demo
+    data = build_report_data(res)
+    f = res.filter
+    nees = data.solutions["forward"].nees
+    err = data.solutions["forward"].errors
+    ep = np.asarray(f.epoch_times, float)
+    for t in nees.index[[5, 100, 500, -1]]:
+        k = int(np.argmin(np.abs(ep - t)))
+        assert abs(ep[k] - t) < 1e-6
+        e = err.loc[t, ["east", "north", "up"]].to_numpy(float)
+        want = e @ np.linalg.solve(f.P_filtered[k][:3, :3], e)
+        assert nees.loc[t, "position"] == pytest.approx(want, rel=1e-9)
+        e = err.loc[t, ["vel_e", "vel_n", "vel_u"]].to_numpy(float)
+        assert nees.loc[t, "velocity"] == pytest.approx(
+            e @ np.linalg.solve(f.P_filtered[k][3:6, 3:6], e), rel=1e-9)
