@@ -47,9 +47,20 @@ from typing import Any
 
 import numpy as np
 import pandas as pd
-from scipy.stats import chi2
 
 from .config import Job, load_job_dict
+from .consistency import (  # noqa: F401  (re-exported: the Monte Carlo API names them)
+    ANGLE_QUANTITIES,
+    ERROR_QUANTITIES,
+    NEES_BLOCKS,
+    STD_OF,
+    TIME_TOL,
+    chi2_bounds,
+    match_times,
+    nees_blocks,
+    solution_errors,
+    wrap_angle,
+)
 from .errors import ConfigError, FilterHealthError
 from .outages import in_windows
 
@@ -57,17 +68,7 @@ __all__ = ["ERROR_QUANTITIES", "NEES_BLOCKS", "MonteCarloResult", "MonteCarloSet
            "RunRecord", "aggregate", "draw_seeds", "envelope_figure", "percentile_table",
            "record_from_result", "run_montecarlo", "run_one"]
 
-#: error quantities of every run (units m, m/s, rad) and the filter std column of each
-ERROR_QUANTITIES = ("east", "north", "up", "horizontal", "vel_e", "vel_n", "vel_u",
-                    "roll", "pitch", "heading")
-STD_OF = {"east": "east_std", "north": "north_std", "up": "up_std", "horizontal": None,
-          "vel_e": "vel_e_std", "vel_n": "vel_n_std", "vel_u": "vel_u_std",
-          "roll": "roll_std", "pitch": "pitch_std", "heading": "heading_std"}
-#: NEES blocks: error-state slices (pos, vel, att = misalignment phi)
-NEES_BLOCKS = {"pos": slice(0, 3), "vel": slice(3, 6), "att": slice(6, 9)}
 SOLUTIONS = ("forward", "smoothed")
-ANGLE_QUANTITIES = ("roll", "pitch", "heading")
-TIME_TOL = 1e-6  #: grid and epoch matching tolerance [s]
 
 
 # --- settings ---------------------------------------------------------------------------------
@@ -204,67 +205,6 @@ class RunRecord:
     summary: dict = field(default_factory=dict)
 
 
-def _wrap(a: np.ndarray) -> np.ndarray:
-    return (a + np.pi) % (2.0 * np.pi) - np.pi
-
-
-def _match(a: np.ndarray, b: np.ndarray, tol: float = TIME_TOL) -> np.ndarray:
-    """Index into sorted ``b`` of the element nearest each ``a`` (-1 where none within
-    ``tol``)."""
-    if not b.size:
-        return np.full(a.size, -1)
-    j = np.searchsorted(b, a)
-    lo = np.clip(j - 1, 0, b.size - 1)
-    hi = np.clip(j, 0, b.size - 1)
-    pick = np.where(np.abs(b[lo] - a) <= np.abs(b[hi] - a), lo, hi)
-    return np.where(np.abs(b[pick] - a) <= tol, pick, -1)
-
-
-def solution_errors(sol: pd.DataFrame, truth: pd.DataFrame, times: np.ndarray
-                    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Errors (T, Q), filter stds (T, Q) and the 9-vector error state ``(dr_enu, dv, phi)``
-    (T, 9) of ``sol`` against ``truth`` at ``times`` (rows present in both tables)."""
-    from .attitude import attitude_error, euler_to_dcm
-    from .earth import radii
-
-    i_s = _match(times, sol.index.to_numpy(float))
-    i_t = _match(times, truth.index.to_numpy(float))
-    if np.any(i_s < 0) or np.any(i_t < 0):
-        raise ValueError("solution_errors: times missing from the solution or the truth")
-    s = sol.iloc[i_s]
-    tr = truth.iloc[i_t]
-    lat = tr["lat"].to_numpy(float)
-    h = tr["height"].to_numpy(float)
-    M, N = radii(lat)
-    de = _wrap(s["lon"].to_numpy(float) - tr["lon"].to_numpy(float)) * (N + h) * np.cos(lat)
-    dn = (s["lat"].to_numpy(float) - lat) * (M + h)
-    du = s["height"].to_numpy(float) - h
-    dv = s[["vel_e", "vel_n", "vel_u"]].to_numpy(float) - \
-        tr[["vel_e", "vel_n", "vel_u"]].to_numpy(float)
-    eul_s = s[["roll", "pitch", "heading"]].to_numpy(float)
-    eul_t = tr[["roll", "pitch", "heading"]].to_numpy(float)
-    deul = _wrap(eul_s - eul_t)
-    err = np.column_stack([de, dn, du, np.hypot(de, dn), dv, deul])
-    sig = np.empty_like(err)
-    for q, name in enumerate(ERROR_QUANTITIES):
-        col = STD_OF[name]
-        sig[:, q] = np.hypot(s["east_std"].to_numpy(float), s["north_std"].to_numpy(float)) \
-            if col is None else s[col].to_numpy(float)
-    phi = attitude_error(euler_to_dcm(*eul_s.T), euler_to_dcm(*eul_t.T))
-    x = np.column_stack([de, dn, du, dv, phi.reshape(-1, 3)])
-    return err, sig, x
-
-
-def nees_blocks(x: np.ndarray, P: np.ndarray) -> np.ndarray:
-    """NEES ``e^T P^-1 e`` of each block of :data:`NEES_BLOCKS`: (T, 9) errors, (T, n, n)
-    covariances -> (T, 3)."""
-    out = np.empty((x.shape[0], len(NEES_BLOCKS)))
-    for k, sl in enumerate(NEES_BLOCKS.values()):
-        e = x[:, sl]
-        out[:, k] = np.einsum("ti,ti->t", e, np.linalg.solve(P[:, sl, sl], e[..., None])[..., 0])
-    return out
-
-
 def grid_times(t: np.ndarray, interval: float) -> np.ndarray:
     """The times of ``t`` that are multiples of ``interval`` (within 1 us)."""
     k = np.round(t / interval)
@@ -282,7 +222,7 @@ def record_from_result(res, settings: MonteCarloSettings, seed: int) -> RunRecor
     t_sol = f.forward.index.to_numpy(float)
     t_truth = truth.index.to_numpy(float)
     times = grid_times(t_sol, settings.grid_interval)
-    times = times[_match(times, t_truth) >= 0]
+    times = times[match_times(times, t_truth) >= 0]
     errors, sigmas, nees = {}, {}, {}
     ep = np.asarray(f.epoch_times, float)
     for name in settings.solutions:
@@ -291,7 +231,7 @@ def record_from_result(res, settings: MonteCarloSettings, seed: int) -> RunRecor
         if sol is None or P is None:
             continue
         err, sig, x = solution_errors(sol, truth, times)
-        k = _match(times, ep)
+        k = match_times(times, ep)
         ne = np.full((times.size, len(NEES_BLOCKS)), np.nan)
         if np.any(k >= 0):
             ne[k >= 0] = nees_blocks(x[k >= 0], P[k[k >= 0]])
@@ -354,19 +294,6 @@ def _stack(arrays: list[np.ndarray], times: list[np.ndarray], grid: np.ndarray) 
 
 def _union(times: list[np.ndarray]) -> np.ndarray:
     return np.unique(np.concatenate(times)) if times else np.empty(0)
-
-
-def chi2_bounds(dof: np.ndarray, n: np.ndarray, confidence: float) -> tuple[np.ndarray, np.ndarray]:
-    """Two-sided bounds of the average of ``n`` chi-square(``dof``) variables."""
-    dof = np.asarray(dof, float)
-    n = np.asarray(n, float)
-    a = (1.0 - confidence) / 2.0
-    ok = (n > 0) & (dof > 0)
-    nd = np.where(ok, n * dof, 1.0)
-    nn = np.where(ok, n, 1.0)
-    lo = np.where(ok, chi2.ppf(a, nd) / nn, np.nan)
-    hi = np.where(ok, chi2.ppf(1.0 - a, nd) / nn, np.nan)
-    return lo, hi
 
 
 def _stat_block(v: np.ndarray, absval: bool, percentiles) -> dict:

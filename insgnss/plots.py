@@ -471,7 +471,7 @@ def _moving_mean(y: np.ndarray, w: int) -> np.ndarray:
 
 def _chi2_panel(p: Panel, t, v, dof: float, window: int, accepted=None, color="#1f77b4"):
     """NEES/NIS points, the 95 % bounds of one sample and of the moving mean, the mean."""
-    from .montecarlo import chi2_bounds
+    from .consistency import chi2_bounds
     from .report_data import CONFIDENCE
 
     lo1, hi1 = chi2_bounds(np.array([dof]), np.array([1]), CONFIDENCE)

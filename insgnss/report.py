@@ -347,6 +347,7 @@ def write_report(result, path: str | os.PathLike, *, dest=None, figures=()) -> l
                 atomic_write(dest(name), lambda p, f=fig, e=ext: f.savefig(p, format=e))
             written.append(name)
     atomic_write_text(path, render_report(result, data, pngs))
-    atomic_write_text(dest(INTERACTIVE_NAME), render_interactive(result, data, specs))
+    atomic_write_text(dest(INTERACTIVE_NAME),
+                      render_interactive(data, specs, summary_html(result, data), STYLE))
     written.append(INTERACTIVE_NAME)
     return written

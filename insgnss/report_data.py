@@ -10,7 +10,7 @@ Errors (estimate minus reference)
   (the solution interpolated in ECEF and moved to the reference point by the lever arm);
 - velocity (ENU) and attitude (roll, pitch, heading, wrapped to +-180 deg): where the reference
   has ``vel_e vel_n vel_u`` / ``roll pitch heading`` (a simulated truth has them, real references
-  often only positions), by :func:`insgnss.montecarlo.solution_errors` on the solution sampled at
+  often only positions), by :func:`insgnss.consistency.solution_errors` on the solution sampled at
   the reference epochs (linear interpolation, heading unwrapped). A reference that measures the
   antenna (``point = "antenna"``) with a non-zero lever arm has the antenna's velocity
   ``v + C (w x l)``: velocity errors are then not formed (the body rate is not in the tables) and
@@ -21,12 +21,12 @@ NEES / NIS (single run; Bar-Shalom, Li & Kirubarajan 2001, sec. 5.4)
 At each filter epoch that coincides with a reference epoch, ``e^T P^-1 e`` of the position,
 velocity and attitude blocks (3 dof each; attitude ``e`` is the misalignment ``phi`` of
 ``C_est = exp([phi x]) C_true``, :func:`insgnss.attitude.attitude_error`) with the full
-``P(e|e)`` of the forward filter or the smoothed ``P``; :func:`insgnss.montecarlo.nees_blocks`.
+``P(e|e)`` of the forward filter or the smoothed ``P``; :func:`insgnss.consistency.nees_blocks`.
 A process that keeps no epoch covariances (the foot preset) gets the diagonal of its std
 columns, said in the figure. NIS comes from the innovation log (``nis``, ``dof``). Bounds: the
 two-sided 95 % interval of one chi-square(dof) sample, and of the moving mean over ``window``
 samples, ``chi2.ppf((1 -+ 0.95) / 2, window dof) / window``
-(:func:`insgnss.montecarlo.chi2_bounds`).
+(:func:`insgnss.consistency.chi2_bounds`).
 
 Drift inside outages
 --------------------
@@ -129,7 +129,7 @@ def _angle_cols(df: pd.DataFrame) -> list[str]:
 def sample_at(sol: pd.DataFrame, times: np.ndarray) -> pd.DataFrame:
     """``sol`` at ``times`` inside its span: the rows themselves where the times coincide (1 us),
     else linear interpolation of every column (angles unwrapped, lon too)."""
-    from .montecarlo import _match
+    from .consistency import match_times as _match
 
     ts = sol.index.to_numpy(float)
     times = np.asarray(times, float)
@@ -149,8 +149,8 @@ def sample_at(sol: pd.DataFrame, times: np.ndarray) -> pd.DataFrame:
 
 def _state_errors(sol: pd.DataFrame, ref: pd.DataFrame, kinds: tuple) -> tuple:
     """Velocity / attitude errors and stds at the reference epochs, and the 9-vector error state
-    (:func:`insgnss.montecarlo.solution_errors`)."""
-    from .montecarlo import ERROR_QUANTITIES, solution_errors
+    (:func:`insgnss.consistency.solution_errors`)."""
+    from .consistency import ERROR_QUANTITIES, solution_errors
 
     need = ["lat", "lon", "height", "vel_e", "vel_n", "vel_u", "roll", "pitch", "heading"]
     tr = ref.index.to_numpy(float)
@@ -173,7 +173,8 @@ def _state_errors(sol: pd.DataFrame, ref: pd.DataFrame, kinds: tuple) -> tuple:
 
 def _nees(res_filter, name: str, sol: pd.DataFrame, x: np.ndarray, t_x: np.ndarray,
           kinds: tuple) -> tuple[pd.DataFrame | None, str]:
-    from .montecarlo import NEES_BLOCKS, _match, nees_blocks
+    from .consistency import NEES_BLOCKS, nees_blocks
+    from .consistency import match_times as _match
 
     P = getattr(res_filter, "P_filtered" if name == "forward" else "P_smoothed", None)
     ep = getattr(res_filter, "epoch_times", None)

@@ -218,17 +218,17 @@ SCRIPT = """
 """
 
 
-def render_interactive(result, data: ReportData, specs: list[FigureSpec]) -> str:
-    """The interactive page as an HTML string."""
-    from .report import STYLE, summary_html
-
+def render_interactive(data: ReportData, specs: list[FigureSpec], summary: str,
+                       style: str = "") -> str:
+    """The interactive page as an HTML string: ``summary`` is the HTML of the summary section
+    (:func:`insgnss.report.summary_html`, the same as on the static page), ``style`` its CSS."""
     figs = {sp.key: figure_json(sp) for sp in specs}
     title = f"insgnss interactive report: {data.title}"
     body = [f"<h1>{html.escape(title)}</h1>",
             "<nav><a href='report.html'>static report</a> | "
             + " ".join(f"<a href='#{sp.key}'>{html.escape(sp.title)}</a>" for sp in specs)
             + "</nav>", "<p class='note'>Drag to zoom, double-click to reset, scroll to zoom; "
-            "the time axes of one figure move together.</p>", summary_html(result, data)]
+            "the time axes of one figure move together.</p>", summary]
     for sp in specs:
         extra = ""
         if sp.key == "track":
@@ -244,5 +244,5 @@ def render_interactive(result, data: ReportData, specs: list[FigureSpec]) -> str
     body.append(f"<script type='application/json' id='insgnss-map'>{mp}</script>")
     body.append(f"<script>{plotly_js()}</script><script>{SCRIPT}</script>")
     return ("<!DOCTYPE html><html lang='en'><head><meta charset='utf-8'>"
-            f"<title>{html.escape(title)}</title><style>{STYLE}</style></head><body>"
+            f"<title>{html.escape(title)}</title><style>{style}</style></head><body>"
             + "\n".join(body) + "</body></html>\n")
