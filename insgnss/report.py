@@ -130,10 +130,12 @@ def measurement_counts(summary: dict, innovations: pd.DataFrame | None = None) -
     meas = summary.get("measurements") or {}
     rej = summary.get("rejected") or {}
     rows = []
+    fields = ["offered", "applied", "rejected", "recovered"]
+    if any(isinstance(v, dict) and "unusable" in v for v in meas.values()):
+        fields.append("unusable")  # epochs a model could not use (e.g. no valid fix)
     for ty, v in meas.items():
         if isinstance(v, dict):
-            row = {"measurement": ty, **{k: v.get(k) for k in
-                                         ("offered", "applied", "rejected", "recovered")}}
+            row = {"measurement": ty, **{k: v.get(k) for k in fields}}
         else:
             row = {"measurement": ty, "offered": int(v), "applied": None,
                    "rejected": int(rej.get(ty, 0)), "recovered": None}
@@ -144,8 +146,7 @@ def measurement_counts(summary: dict, innovations: pd.DataFrame | None = None) -
                 if len(d) and "recovered" in d.columns:
                     row["recovered"] = int(d["recovered"].astype(bool).sum())
         rows.append(row)
-    return pd.DataFrame(rows, columns=["measurement", "offered", "applied", "rejected",
-                                       "recovered"])
+    return pd.DataFrame(rows, columns=["measurement", *fields])
 
 
 ACCURACY_COLUMNS = {  # summary key -> readable header
@@ -226,6 +227,9 @@ def summary_html(result, data: ReportData) -> str:
     counts = measurement_counts(s, data.innovations)
     if len(counts):
         parts.append("<h3>Measurements</h3>" + table_html(counts, left=("measurement",)))
+    if s.get("aiding_warnings"):
+        parts.append("<h3>Aiding warnings</h3>" + "".join(
+            f"<p class='note'>{html.escape(str(w))}</p>" for w in s["aiding_warnings"]))
     timing = s.get("timing_s") or {}
     if timing:
         parts.append("<h3>Timing [s]</h3>" + table_html(pd.DataFrame(

@@ -171,6 +171,9 @@ def test_measurement_counts_old_and_new_forms():
                                          "recovered": 1}}}
     t = measurement_counts(new).set_index("measurement")
     assert t.loc["gnss_pos"].tolist() == [10, 7, 3, 1]
+    new["measurements"]["gnss_pos"]["unusable"] = 2
+    t = measurement_counts(new).set_index("measurement")
+    assert t.loc["gnss_pos", "unusable"] == 2
     assert fmt(float("nan")) == "-" and fmt({"a": 1.23456}) == "a: 1.235" and fmt(None) == "-"
 
 
