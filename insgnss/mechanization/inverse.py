@@ -64,14 +64,40 @@ def inverse_mechanize(
 def inverse_increments(t, lat, h, v, C, gravity_model="somigliana", attitude_update="exact"):
     """Array form of :func:`inverse_mechanize`: returns ``(dtheta, dv)`` of shape (N, 3)."""
     dt = np.diff(t)
-    la, hh, vv, C0, C1 = lat[:-1], h[:-1], v[:-1], C[:-1], C[1:]
-    M, N = radii(la)
-    slat, clat = np.sin(la), np.cos(la)
+    la, hh, v0 = lat[:-1], h[:-1], v[:-1]
+    # Earth terms at the predicted mid-interval point, as strapdown.llf_earth_terms
+    M0, _ = radii(la)
+    lat_m = la + 0.5 * dt * v0[:, 1] / (M0 + hh)
+    h_m = hh + 0.5 * dt * v0[:, 2]
+    M, N = radii(lat_m)
+    slat, clat = np.sin(lat_m), np.cos(lat_m)
     wie = np.stack([np.zeros_like(la), OMEGA_E * clat, OMEGA_E * slat], -1)
-    wel = np.stack([-vv[:, 1] / (M + hh), vv[:, 0] / (N + hh), vv[:, 0] * slat / clat / (N + hh)], -1)
+    K = np.zeros((la.size, 3, 3))
+    K[:, 0, 1] = -1.0 / (M + h_m)
+    K[:, 1, 0] = 1.0 / (N + h_m)
+    K[:, 2, 0] = slat / clat / (N + h_m)
+    g = earth.normal_gravity(lat_m, h_m, gravity_model)
+    return inverse_step_increments(dt, v0, v[1:], C[:-1], C[1:], wie, K, g, attitude_update)
+
+
+def inverse_step_increments(dt, v0, v1, C0, C1, wie, K, g, attitude_update="exact"):
+    """Invert the velocity and attitude stages of the strapdown step (any navigation frame).
+
+    Given per interval the start/end velocity ``v0, v1`` (N-1, 3) and attitude ``C0, C1``
+    (N-1, 3, 3) in the navigation frame, the Earth rate ``wie`` (N-1, 3), the transport-rate
+    matrix ``K`` (N-1, 3, 3: ``w_en = K v``) and gravity ``g`` (N-1,) at mid-interval, returns
+    ``(dtheta, dv)`` of shape (N, 3) with a zero first row. Exact dual of
+    :func:`insgnss.mechanization.strapdown.velocity_update` and ``attitude_step``:
+
+    - ``zeta = (w_ie + K (v0 + v1) / 2) dt``, ``theta' = log(C0^T exp([zeta x]) C1)``;
+    - ``dv = C_mid^T (v1 - v0 - g^n dt + (w_ie x (v0 + v1) + B(v0, v1)) dt)`` with
+      ``C_mid = exp(-[zeta0/2 x]) C0 exp([theta'/2 x])``, ``zeta0 = (w_ie + K v0) dt``.
+    """
+    dt = np.asarray(dt, float)
+    rho0 = np.einsum("kij,kj->ki", K, v0)
+    rho1 = np.einsum("kij,kj->ki", K, v1)
+    zeta = (wie + 0.5 * (rho0 + rho1)) * dt[:, None]
     C0T = np.swapaxes(C0, 1, 2)
-    zeta = (wie + wel) * dt[:, None]
-    # C_k = exp(-zeta) C_{k-1} exp(theta)  ->  theta = log(C_{k-1}^T exp(zeta) C_k)
     th_applied = dcm_to_rotvec(C0T @ rotvec_to_dcm(zeta) @ C1)
     dth = th_applied
     if attitude_update_id(attitude_update) == ATTITUDE_FIRST_ORDER:
@@ -80,10 +106,10 @@ def inverse_increments(t, lat, h, v, C, gravity_model="somigliana", attitude_upd
         a_safe = np.where(small, 1.0, a)
         scale = np.where(small, 1.0 + a * a / 12.0, 2.0 * np.tan(0.5 * a_safe) / a_safe)
         dth = th_applied * scale[:, None]
-    Cmid = rotvec_to_dcm(-0.5 * zeta) @ C0 @ rotvec_to_dcm(0.5 * th_applied)
-    g = earth.normal_gravity(la, hh, gravity_model)
-    acc = np.cross(2.0 * wie + wel, 0.5 * (vv + v[1:]))  # Coriolis at the mid velocity
-    rhs = (v[1:] - vv) + acc * dt[:, None]
+    zeta0 = (wie + rho0) * dt[:, None]
+    Cmid = rotvec_to_dcm(-0.5 * zeta0) @ C0 @ rotvec_to_dcm(0.5 * th_applied)
+    acc = np.cross(wie, v0 + v1) + 0.5 * (np.cross(rho0, v1) + np.cross(rho1, v0))
+    rhs = (v1 - v0) + acc * dt[:, None]
     rhs[:, 2] += g * dt
     dvb = np.einsum("kji,kj->ki", Cmid, rhs)
     zero = np.zeros((1, 3))

@@ -24,8 +24,8 @@ are continuous at segment boundaries. The plateau rate is the commanded accelera
 Position is *not* integrated analytically: it is obtained from the ENU velocity by
 :func:`insgnss.mechanization.inverse.integrate_position`, the exact trapezoidal rule of the forward
 mechanization, so ``mechanize(inverse_mechanize(truth))`` reproduces the truth to rounding and the
-discrete derivative ``(p_k - p_{k-1}) / dt`` (in metres, with the radii at k-1) equals
-``(v_k + v_{k-1}) / 2`` to rounding.
+discrete derivative ``(p_k - p_{k-1}) / dt`` (in metres, with the radii at the mid-interval point
+of the step's rule) equals ``(v_k + v_{k-1}) / 2`` to rounding.
 
 Attitude (vehicle models)
 -------------------------
