@@ -22,6 +22,8 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
+from .errors import InvalidValueError
+
 # --- WGS84 ellipsoid (GRS80 differs only in 1/f in the 9th digit of b) -------------------------
 A = 6378137.0  #: semi-major axis [m]
 F = 1.0 / 298.257223563  #: flattening
@@ -60,6 +62,29 @@ def gravity_model_id(name: str | int) -> int:
         raise ValueError(
             f"unknown gravity model {name!r}; expected one of {sorted(GRAVITY_MODELS)}"
         ) from None
+
+
+def check_latitude(lat, where: str = "lat") -> None:
+    """Raise :class:`~insgnss.errors.InvalidValueError` unless every latitude is finite and in
+    [-pi/2, pi/2] radians.
+
+    A value outside that range but within +-90 is almost certainly given in degrees; the message
+    says so (``NavState.from_euler(45.07, ...)`` would otherwise run at a latitude of 45 rad).
+    ``where`` names the argument or column in the message.
+    """
+    a = np.asarray(lat, dtype=float)
+    bad = ~np.isfinite(a) | (np.abs(a) > 0.5 * np.pi + 1e-12)
+    if not np.any(bad):
+        return
+    i = int(np.flatnonzero(bad.ravel())[0])
+    v = float(a.ravel()[i])
+    row = None if a.ndim == 0 else i + 1
+    if np.isfinite(v) and abs(v) <= 90.0:
+        msg = (f"latitude {v:g} rad is outside [-pi/2, pi/2]: it looks like degrees "
+               f"({v:g} deg = {np.radians(v):.6f} rad); latitudes are in radians here")
+    else:
+        msg = f"latitude {v:g} rad is not a latitude"
+    raise InvalidValueError(msg, column=where, row=row, expected="radians in [-pi/2, pi/2]")
 
 
 @njit(cache=True)
@@ -189,6 +214,18 @@ def _ecef_to_enu_matrix(lat, lon):
 def ecef_to_enu_matrix(lat: float, lon: float) -> np.ndarray:
     """Rotation matrix ``C_e^l`` from ECEF to the ENU frame at (lat, lon) [rad]."""
     return _ecef_to_enu_matrix(float(lat), float(lon))
+
+
+def enu_to_ecef_dcm(lat, lon) -> np.ndarray:
+    """``C_l^e`` (columns: east, north, up in ECEF; the transpose of :func:`ecef_to_enu_matrix`)
+    stacked over ``lat, lon`` [rad] of any shape -> shape + (3, 3)."""
+    lat, lon = np.asarray(lat, float), np.asarray(lon, float)
+    sl, cl, so, co = np.sin(lat), np.cos(lat), np.sin(lon), np.cos(lon)
+    C = np.empty(np.broadcast(lat, lon).shape + (3, 3))
+    C[..., 0, 0], C[..., 1, 0], C[..., 2, 0] = -so, co, 0.0
+    C[..., 0, 1], C[..., 1, 1], C[..., 2, 1] = -sl * co, -sl * so, cl
+    C[..., 0, 2], C[..., 1, 2], C[..., 2, 2] = cl * co, cl * so, sl
+    return C
 
 
 def ecef_to_enu_vectors(d, lat, lon) -> np.ndarray:

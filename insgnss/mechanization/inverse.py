@@ -1,17 +1,22 @@
 """Inverse mechanization: IMU increments from a trajectory, the exact dual of
-:func:`insgnss.mechanization.strapdown.mechanize`.
+:func:`insgnss.mechanization.strapdown.mechanize` (local-level ENU or wander-azimuth frame).
 
-Each forward step (see :mod:`.strapdown`) is inverted in closed form, vectorised over samples:
+Each forward step (see :mod:`.strapdown`, :mod:`.wander`) is inverted in closed form, vectorised
+over samples (:func:`insgnss.mechanization.core.inverse_step_increments`):
 
-- attitude: ``dtheta = log(C_{k-1}^T exp([zeta x]) C_k)`` with ``zeta = w_il^l dt`` (for the
-  first-order update the angle is mapped back by ``|theta| = 2 tan(|theta'| / 2)``);
-- velocity: ``dv = C_mid^T (v_k - v_{k-1} - (g^l - (2 w_ie^l + w_el^l) x v_mid) dt)`` with
-  ``C_mid = exp(-[zeta/2 x]) C_{k-1} exp([theta'/2 x])``.
+- Earth terms at the predicted mid-interval point from the trajectory's state at k-1 (exactly
+  the forward's :func:`~.strapdown.llf_earth_terms` / :func:`~.wander.wander_earth_terms`);
+- attitude: ``dtheta = log(C_{k-1}^T exp([zeta x]) C_k)`` with
+  ``zeta = (w_ie + K (v_{k-1} + v_k) / 2) dt`` (for the first-order update the angle is mapped
+  back by ``|theta| = 2 tan(|theta'| / 2)``);
+- velocity: ``dv = C_mid^T (v_k - v_{k-1} - g^n dt + (w_ie x (v_{k-1} + v_k) + B(v_{k-1}, v_k)) dt)``
+  with ``C_mid = exp(-[zeta0/2 x]) C_{k-1} exp([theta'/2 x])``, ``zeta0 = (w_ie + K v_{k-1}) dt``.
 
-Position enters only through the Earth quantities at k-1. The forward run reproduces the
-position of the trajectory when the trajectory's position is the trapezoidal integral of its
-velocity (as :func:`integrate_position` makes it, and as :mod:`insgnss.simulate` generates it);
-velocity and attitude are reproduced in any case.
+Position enters only through the Earth quantities. The forward run reproduces the position of
+the trajectory when the trajectory's position is the forward position rule's integral of its
+velocity (as :func:`integrate_position` and
+:func:`~insgnss.mechanization.wander.integrate_position_wander` make it, and as
+:mod:`insgnss.simulate` generates it); velocity and attitude then follow to rounding.
 """
 
 from __future__ import annotations
@@ -21,10 +26,13 @@ import pandas as pd
 from numba import njit
 
 from .. import earth
-from ..attitude import dcm_to_rotvec, euler_to_dcm, rotvec_to_dcm
-from ..earth import OMEGA_E, radii
+from ..attitude import euler_to_dcm
+from ..earth import check_latitude
+from ..errors import ConfigError
 from ..imu import increments_table
-from .strapdown import ATTITUDE_FIRST_ORDER, attitude_update_id, position_update
+from .core import FRAME_WANDER, frame_id, inverse_step_increments
+from .strapdown import llf_earth_terms, position_update
+from .wander import inverse_increments_wander
 
 
 def inverse_mechanize(
@@ -32,6 +40,8 @@ def inverse_mechanize(
     *,
     gravity_model: str = "somigliana",
     attitude_update: str = "exact",
+    frame: str = "enu",
+    wander_angle: float | None = None,
 ) -> pd.DataFrame:
     """IMU increments that make the forward mechanization follow ``trajectory`` exactly.
 
@@ -40,8 +50,13 @@ def inverse_mechanize(
     trajectory : DataFrame
         Indexed by time [s] with columns ``lat lon height`` [rad, m], ``vel_e vel_n vel_u``
         [m/s] and ``roll pitch heading`` [rad].
-    gravity_model, attitude_update
-        Must match the forward run.
+    gravity_model, attitude_update, frame
+        Must match the forward run (:func:`~insgnss.mechanization.strapdown.mechanize`).
+        ``frame="wander"`` runs the dual of the wander-azimuth step, which is regular over the
+        poles (no sample may lie exactly on a pole, where the ENU columns are undefined).
+    wander_angle : float, optional
+        Wander angle at the first sample [rad] (default: the trajectory's ``wander_angle``
+        column if present, else 0). The increments do not depend on it.
 
     Returns
     -------
@@ -50,6 +65,7 @@ def inverse_mechanize(
     """
     t = np.asarray(trajectory.index, float)
     lat = trajectory["lat"].to_numpy(float)
+    check_latitude(lat, "lat")
     h = trajectory["height"].to_numpy(float)
     v = trajectory[["vel_e", "vel_n", "vel_u"]].to_numpy(float)
     C = euler_to_dcm(
@@ -57,63 +73,39 @@ def inverse_mechanize(
         trajectory["pitch"].to_numpy(float),
         trajectory["heading"].to_numpy(float),
     )
-    dth, dv = inverse_increments(t, lat, h, v, C, gravity_model, attitude_update)
+    if frame_id(frame) == FRAME_WANDER:
+        if wander_angle is None:
+            wander_angle = (float(trajectory["wander_angle"].iloc[0])
+                            if "wander_angle" in trajectory else 0.0)
+        dth, dv = inverse_increments_wander(t, lat, trajectory["lon"].to_numpy(float), h, v, C,
+                                            wander_angle, earth.gravity_model_id(gravity_model),
+                                            attitude_update)
+    else:
+        if wander_angle is not None:
+            raise ConfigError("wander_angle is only used with frame='wander'", column="wander_angle")
+        dth, dv = inverse_increments(t, lat, h, v, C, gravity_model, attitude_update)
     return increments_table(t, dth, dv)
 
 
+@njit(cache=True)
+def _llf_mid_terms_batch(lat, h, v, dt, gravity_model, wie, K, g):
+    """:func:`~.strapdown.llf_earth_terms` for every interval."""
+    for k in range(dt.shape[0]):
+        g[k] = llf_earth_terms(lat[k], h[k], v[k], dt[k], gravity_model, wie[k], K[k])[0]
+
+
 def inverse_increments(t, lat, h, v, C, gravity_model="somigliana", attitude_update="exact"):
-    """Array form of :func:`inverse_mechanize`: returns ``(dtheta, dv)`` of shape (N, 3)."""
-    dt = np.diff(t)
-    la, hh, v0 = lat[:-1], h[:-1], v[:-1]
-    # Earth terms at the predicted mid-interval point, as strapdown.llf_earth_terms
-    M0, _ = radii(la)
-    lat_m = la + 0.5 * dt * v0[:, 1] / (M0 + hh)
-    h_m = hh + 0.5 * dt * v0[:, 2]
-    M, N = radii(lat_m)
-    slat, clat = np.sin(lat_m), np.cos(lat_m)
-    wie = np.stack([np.zeros_like(la), OMEGA_E * clat, OMEGA_E * slat], -1)
-    K = np.zeros((la.size, 3, 3))
-    K[:, 0, 1] = -1.0 / (M + h_m)
-    K[:, 1, 0] = 1.0 / (N + h_m)
-    K[:, 2, 0] = slat / clat / (N + h_m)
-    g = earth.normal_gravity(lat_m, h_m, gravity_model)
-    return inverse_step_increments(dt, v0, v[1:], C[:-1], C[1:], wie, K, g, attitude_update)
-
-
-def inverse_step_increments(dt, v0, v1, C0, C1, wie, K, g, attitude_update="exact"):
-    """Invert the velocity and attitude stages of the strapdown step (any navigation frame).
-
-    Given per interval the start/end velocity ``v0, v1`` (N-1, 3) and attitude ``C0, C1``
-    (N-1, 3, 3) in the navigation frame, the Earth rate ``wie`` (N-1, 3), the transport-rate
-    matrix ``K`` (N-1, 3, 3: ``w_en = K v``) and gravity ``g`` (N-1,) at mid-interval, returns
-    ``(dtheta, dv)`` of shape (N, 3) with a zero first row. Exact dual of
-    :func:`insgnss.mechanization.strapdown.velocity_update` and ``attitude_step``:
-
-    - ``zeta = (w_ie + K (v0 + v1) / 2) dt``, ``theta' = log(C0^T exp([zeta x]) C1)``;
-    - ``dv = C_mid^T (v1 - v0 - g^n dt + (w_ie x (v0 + v1) + B(v0, v1)) dt)`` with
-      ``C_mid = exp(-[zeta0/2 x]) C0 exp([theta'/2 x])``, ``zeta0 = (w_ie + K v0) dt``.
-    """
-    dt = np.asarray(dt, float)
-    rho0 = np.einsum("kij,kj->ki", K, v0)
-    rho1 = np.einsum("kij,kj->ki", K, v1)
-    zeta = (wie + 0.5 * (rho0 + rho1)) * dt[:, None]
-    C0T = np.swapaxes(C0, 1, 2)
-    th_applied = dcm_to_rotvec(C0T @ rotvec_to_dcm(zeta) @ C1)
-    dth = th_applied
-    if attitude_update_id(attitude_update) == ATTITUDE_FIRST_ORDER:
-        a = np.linalg.norm(th_applied, axis=1)
-        small = a < 1e-8
-        a_safe = np.where(small, 1.0, a)
-        scale = np.where(small, 1.0 + a * a / 12.0, 2.0 * np.tan(0.5 * a_safe) / a_safe)
-        dth = th_applied * scale[:, None]
-    zeta0 = (wie + rho0) * dt[:, None]
-    Cmid = rotvec_to_dcm(-0.5 * zeta0) @ C0 @ rotvec_to_dcm(0.5 * th_applied)
-    acc = np.cross(wie, v0 + v1) + 0.5 * (np.cross(rho0, v1) + np.cross(rho1, v0))
-    rhs = (v1 - v0) + acc * dt[:, None]
-    rhs[:, 2] += g * dt
-    dvb = np.einsum("kji,kj->ki", Cmid, rhs)
-    zero = np.zeros((1, 3))
-    return np.vstack([zero, dth]), np.vstack([zero, dvb])
+    """Array form of :func:`inverse_mechanize` (ENU frame): returns ``(dtheta, dv)`` (N, 3)."""
+    dt = np.diff(np.asarray(t, float))
+    n = dt.size
+    wie = np.empty((n, 3))
+    K = np.empty((n, 3, 3))
+    g = np.empty(n)
+    _llf_mid_terms_batch(np.ascontiguousarray(lat[:-1], dtype=float),
+                         np.ascontiguousarray(h[:-1], dtype=float),
+                         np.ascontiguousarray(v[:-1], dtype=float), dt,
+                         earth.gravity_model_id(gravity_model), wie, K, g)
+    return inverse_step_increments(dt, v[:-1], v[1:], C[:-1], C[1:], wie, K, g, attitude_update)
 
 
 @njit(cache=True)
@@ -131,6 +123,7 @@ def integrate_position(t, vel, lat0: float, lon0: float, h0: float) -> np.ndarra
     """Position (N, 3: lat, lon [rad], h [m]) from ENU velocity by exactly the forward
     mechanization's trapezoidal rule, so that trajectories built with it are reproduced by
     ``mechanize(inverse_mechanize(...))`` to rounding."""
+    check_latitude(lat0, "lat0")
     t = np.ascontiguousarray(t, dtype=float)
     vel = np.ascontiguousarray(vel, dtype=float)
     out = np.empty((t.size, 3))

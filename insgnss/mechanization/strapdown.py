@@ -49,70 +49,35 @@ wander-azimuth frame (:mod:`.wander`) reuses stages 2 and 3.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
-
 import numpy as np
 import pandas as pd
 from numba import njit
 
 from .. import attitude, earth
 from ..align import gyrocompass, level
-from ..attitude import dcm_to_euler, euler_to_dcm, rotvec_to_dcm_nb
-from ..earth import OMEGA_E, normal_gravity_id, radii
+from ..attitude import dcm_to_euler, euler_to_dcm
+from ..earth import OMEGA_E, check_latitude, normal_gravity_id, radii
+from ..errors import ConfigError
 from ..imu import compensation_matrix, coning_sculling, increments
-
-NAV_COLS = ["lat", "lon", "height", "vel_e", "vel_n", "vel_u", "roll", "pitch", "heading"]
-
-#: shape of the scratch array :func:`strapdown_step` needs (``np.empty(STEP_WORK_SHAPE)``)
-STEP_WORK_SHAPE = (8, 3, 3)
-
-#: attitude update identifiers used by the kernel
-ATTITUDE_EXACT = 0
-ATTITUDE_FIRST_ORDER = 1
-ATTITUDE_UPDATES = {"exact": ATTITUDE_EXACT, "first_order": ATTITUDE_FIRST_ORDER}
-
-
-@dataclass
-class NavState:
-    """Navigation state: position (lat, lon [rad], height [m]), ENU velocity [m/s] and
-    attitude ``C_b^l``.
-
-    Use :meth:`from_euler` to build one from roll, pitch, heading.
-    """
-
-    lat: float
-    lon: float
-    height: float
-    vel: np.ndarray = field(default_factory=lambda: np.zeros(3))
-    C: np.ndarray = field(default_factory=lambda: np.eye(3))
-    time: float = 0.0
-
-    @classmethod
-    def from_euler(
-        cls,
-        lat: float,
-        lon: float,
-        height: float,
-        vel=(0.0, 0.0, 0.0),
-        roll: float = 0.0,
-        pitch: float = 0.0,
-        heading: float = 0.0,
-        time: float = 0.0,
-        degrees: bool = False,
-    ) -> NavState:
-        """State from Euler angles (seed convention). ``degrees`` applies to lat, lon, angles."""
-        k = np.pi / 180.0 if degrees else 1.0
-        C = euler_to_dcm(roll * k, pitch * k, heading * k)
-        return cls(lat * k, lon * k, float(height), np.asarray(vel, float).copy(), C, float(time))
-
-    @property
-    def euler(self) -> tuple[float, float, float]:
-        """(roll, pitch, heading) [rad]."""
-        r, p, a = dcm_to_euler(self.C)
-        return float(r), float(p), float(a)
-
-    def copy(self) -> NavState:
-        return NavState(self.lat, self.lon, self.height, self.vel.copy(), self.C.copy(), self.time)
+from .core import (  # noqa: F401  (re-exported: the public names of the step live here)
+    ATTITUDE_EXACT,
+    ATTITUDE_FIRST_ORDER,
+    ATTITUDE_UPDATES,
+    FRAME_ENU,
+    FRAME_WANDER,
+    FRAMES,
+    NAV_COLS,
+    STEP_WORK_SHAPE,
+    NavState,
+    attitude_step,
+    attitude_update_id,
+    body_rotation,
+    first_order_angle_scale,
+    frame_id,
+    nav_frame_rotation,
+    velocity_update,
+)
+from .wander import WANDER_COLS, mechanize_wander, wander_state, wander_step, wander_to_nav
 
 
 # --- the compiled step -----------------------------------------------------------------------------
@@ -169,130 +134,6 @@ def llf_earth_terms(lat, h, vel, dt, gravity_model, wie, K):
 
 
 @njit(cache=True)
-def first_order_angle_scale(theta_norm):
-    """Ratio of the rotation angle applied by the normalised first-order quaternion update to
-    ``|theta|``: ``2 atan(|theta|/2) / |theta|``."""
-    if theta_norm < 1e-8:
-        return 1.0 - theta_norm * theta_norm / 12.0
-    return 2.0 * np.arctan(0.5 * theta_norm) / theta_norm
-
-
-@njit(cache=True)
-def _matmul3(A, B, out):
-    for i in range(3):
-        a0, a1, a2 = A[i, 0], A[i, 1], A[i, 2]
-        for j in range(3):
-            out[i, j] = a0 * B[0, j] + a1 * B[1, j] + a2 * B[2, j]
-
-
-@njit(cache=True)
-def body_rotation(dth, attitude_update, th):
-    """The body rotation vector applied for the gyro increment ``dth``: ``dth`` itself (exact
-    update) or the seed's first-order quaternion angle ``2 atan(|dth|/2)`` (eq. 18)."""
-    th[0], th[1], th[2] = dth[0], dth[1], dth[2]
-    if attitude_update == ATTITUDE_FIRST_ORDER:
-        k = first_order_angle_scale(np.sqrt(th[0] ** 2 + th[1] ** 2 + th[2] ** 2))
-        th[0] *= k
-        th[1] *= k
-        th[2] *= k
-
-
-@njit(cache=True)
-def velocity_update(vel, C, th, dv, dt, wie, K, g, fix_height, work):
-    """Velocity over one interval (seed eq. 24, second order), ``vel`` updated in place.
-
-    With ``w_en = K v`` and the start velocity ``v0``::
-
-        v1 = v0 + C_mid dv + g^n dt - (w_ie x (v0 + v1) + B(v0, v1)) dt,
-        B(a, b) = ((K a) x b + (K b) x a) / 2,
-        C_mid = exp(-[zeta0/2 x]) C exp([th/2 x]),   zeta0 = (w_ie + K v0) dt.
-
-    ``B(v0, v1)`` is the symmetric bilinear form of the transport term ``(K v) x v``; it equals
-    that term at the mid velocity to O(dt^2) and is linear in ``v1``, so the implicit equation is
-    solved in closed form (3x3). ``C_mid`` rotates the specific-force increment with the
-    mid-interval attitude (rotation compensation); an O(dt^2) error of ``zeta0`` moves it by
-    O(dt^3). ``C`` is the attitude at the start of the interval. The start velocity is left in
-    ``work[6, 2]``.
-    """
-    vecs = work[6]
-    v0 = vecs[2]
-    v0[0], v0[1], v0[2] = vel[0], vel[1], vel[2]
-    Eb, El, tmp, Cm = work[0], work[1], work[2], work[3]
-    # start transport rate rho0 = K v0 and zeta0 / 2
-    r0 = K[0, 0] * v0[0] + K[0, 1] * v0[1] + K[0, 2] * v0[2]
-    r1 = K[1, 0] * v0[0] + K[1, 1] * v0[1] + K[1, 2] * v0[2]
-    r2 = K[2, 0] * v0[0] + K[2, 1] * v0[1] + K[2, 2] * v0[2]
-    half = vecs[1]
-    half[0], half[1], half[2] = 0.5 * th[0], 0.5 * th[1], 0.5 * th[2]
-    rotvec_to_dcm_nb(half, Eb)
-    a = 0.5 * dt
-    half[0], half[1], half[2] = -a * (wie[0] + r0), -a * (wie[1] + r1), -a * (wie[2] + r2)
-    rotvec_to_dcm_nb(half, El)
-    _matmul3(C, Eb, tmp)
-    _matmul3(El, tmp, Cm)
-    # A v1 = b with A = I + dt [w_ie x] + dt/2 [rho0 x] - dt/2 [v0 x] K,
-    # b = v0 + C_mid dv + g^n dt - dt w_ie x v0
-    we, wn, wu = wie[0], wie[1], wie[2]
-    ve, vn, vu = v0[0], v0[1], v0[2]
-    b0 = ve + Cm[0, 0] * dv[0] + Cm[0, 1] * dv[1] + Cm[0, 2] * dv[2] - dt * (wn * vu - wu * vn)
-    b1 = vn + Cm[1, 0] * dv[0] + Cm[1, 1] * dv[1] + Cm[1, 2] * dv[2] - dt * (wu * ve - we * vu)
-    b2 = (vu + Cm[2, 0] * dv[0] + Cm[2, 1] * dv[1] + Cm[2, 2] * dv[2] - dt * (we * vn - wn * ve)
-          - g * dt)
-    c0, c1, c2 = dt * we + a * r0, dt * wn + a * r1, dt * wu + a * r2
-    # [c x] - a [v0 x] K; row i of [v0 x] K = (v0 x column j of K)_i
-    A = tmp
-    for j in range(3):
-        k0, k1, k2 = K[0, j], K[1, j], K[2, j]
-        A[0, j] = -a * (vn * k2 - vu * k1)
-        A[1, j] = -a * (vu * k0 - ve * k2)
-        A[2, j] = -a * (ve * k1 - vn * k0)
-    A[0, 0] += 1.0
-    A[1, 1] += 1.0
-    A[2, 2] += 1.0
-    A[0, 1] -= c2
-    A[0, 2] += c1
-    A[1, 0] += c2
-    A[1, 2] -= c0
-    A[2, 0] -= c1
-    A[2, 1] += c0
-    # Cramer's rule (A is I + O(dt))
-    m00 = A[1, 1] * A[2, 2] - A[1, 2] * A[2, 1]
-    m01 = A[0, 2] * A[2, 1] - A[0, 1] * A[2, 2]
-    m02 = A[0, 1] * A[1, 2] - A[0, 2] * A[1, 1]
-    m10 = A[1, 2] * A[2, 0] - A[1, 0] * A[2, 2]
-    m11 = A[0, 0] * A[2, 2] - A[0, 2] * A[2, 0]
-    m12 = A[0, 2] * A[1, 0] - A[0, 0] * A[1, 2]
-    m20 = A[1, 0] * A[2, 1] - A[1, 1] * A[2, 0]
-    m21 = A[0, 1] * A[2, 0] - A[0, 0] * A[2, 1]
-    m22 = A[0, 0] * A[1, 1] - A[0, 1] * A[1, 0]
-    det = A[0, 0] * m00 + A[0, 1] * m10 + A[0, 2] * m20
-    vel[0] = (m00 * b0 + m01 * b1 + m02 * b2) / det
-    vel[1] = (m10 * b0 + m11 * b1 + m12 * b2) / det
-    vel[2] = 0.0 if fix_height else (m20 * b0 + m21 * b1 + m22 * b2) / det
-
-
-@njit(cache=True)
-def nav_frame_rotation(wie, K, v0, v1, dt, zeta):
-    """Rotation vector of the navigation frame over the interval relative to inertial space,
-    ``zeta = (w_ie + K (v0 + v1) / 2) dt`` (Earth rate plus transport rate at mid-interval)."""
-    for i in range(3):
-        zeta[i] = (wie[i] + 0.5 * (K[i, 0] * (v0[0] + v1[0]) + K[i, 1] * (v0[1] + v1[1])
-                                   + K[i, 2] * (v0[2] + v1[2]))) * dt
-
-
-@njit(cache=True)
-def attitude_step(C, th, zeta, work):
-    """``C <- exp(-[zeta x]) C exp([th x])`` (Savage 1998; Groves eq. 5.46)."""
-    Eb, El, tmp = work[0], work[1], work[2]
-    half = work[6, 1]
-    rotvec_to_dcm_nb(th, Eb)
-    half[0], half[1], half[2] = -zeta[0], -zeta[1], -zeta[2]
-    rotvec_to_dcm_nb(half, El)
-    _matmul3(C, Eb, tmp)
-    _matmul3(El, tmp, C)
-
-
-@njit(cache=True)
 def strapdown_step(pos, vel, C, dth, dv, dt, gravity_model, attitude_update, fix_height, work):
     """Advance ``pos = [lat, lon, h]``, ``vel`` (ENU) and ``C`` (C_b^l) in place by one interval.
 
@@ -331,17 +172,6 @@ def _mechanize_kernel(t, dth, dv, pos0, vel0, C0, gravity_model, attitude_update
     return pos, vel, C
 
 
-def attitude_update_id(name: str | int) -> int:
-    if isinstance(name, int | np.integer):
-        return int(name)
-    try:
-        return ATTITUDE_UPDATES[name]
-    except KeyError:
-        raise ValueError(
-            f"unknown attitude update {name!r}; expected one of {sorted(ATTITUDE_UPDATES)}"
-        ) from None
-
-
 def mechanize(
     imu: pd.DataFrame,
     initial: NavState,
@@ -351,6 +181,7 @@ def mechanize(
     coning: bool = False,
     fix_height: bool = False,
     return_final: bool = False,
+    frame: str = "enu",
 ):
     """Free-inertial strapdown mechanization of an IMU table.
 
@@ -360,34 +191,45 @@ def mechanize(
         IMU table (rates or increments, see :mod:`insgnss.imu`) indexed by time [s]. The first
         row is the epoch of ``initial``; navigation starts with the second row.
     initial : NavState
-        State at the time of the first row.
-    gravity_model : {"somigliana", "grs80_series"}
+        State at the time of the first row (its ``wander_angle`` is the initial wander angle
+        for ``frame="wander"``).
+    gravity_model : str
+        Normal gravity model, one of :data:`insgnss.earth.GRAVITY_MODELS`.
     attitude_update : {"exact", "first_order"}
         Exact rotation-vector update, or the seed's first-order quaternion update (eq. 18).
     coning : bool
         Apply two-sample coning/sculling corrections to the increments.
     fix_height : bool
-        Hold height and vertical velocity at their initial values (a 2-D free-inertial run;
+        Set the vertical velocity to zero from the first step on (a 2-D free-inertial run;
         the free vertical channel is unstable with time constant ``sqrt(R / 2g)`` ~ 9.5 min).
     return_final : bool
         Also return the final :class:`NavState`.
+    frame : {"enu", "wander"}
+        Navigation frame: local-level ENU (this module) or wander azimuth
+        (:mod:`insgnss.mechanization.wander`, regular over the poles).
 
     Returns
     -------
     DataFrame
         Indexed by time with columns ``lat lon height vel_e vel_n vel_u roll pitch heading``
-        (rad, m, m/s).
+        (rad, m, m/s; ENU velocity and attitude for both frames), plus ``wander_angle`` [rad]
+        for ``frame="wander"``.
     """
+    check_latitude(initial.lat, "initial.lat")
     t, dth, dv = increments(imu)
     if coning:
         dth, dv = coning_sculling(dth, dv)
+    dth, dv = np.ascontiguousarray(dth), np.ascontiguousarray(dv)
+    gid, aid = earth.gravity_model_id(gravity_model), attitude_update_id(attitude_update)
+    if frame_id(frame) == FRAME_WANDER:
+        out, final = mechanize_wander(t, dth, dv, initial, gid, aid, fix_height)
+        df = pd.DataFrame(out, index=pd.Index(t, name="time"), columns=WANDER_COLS)
+        return (df, final) if return_final else df
     out = np.empty((t.size, 9))
     pos0 = np.array([initial.lat, initial.lon, initial.height], float)
     pos, vel, C = _mechanize_kernel(
-        t, np.ascontiguousarray(dth), np.ascontiguousarray(dv), pos0,
-        np.asarray(initial.vel, float), np.ascontiguousarray(initial.C, dtype=float),
-        earth.gravity_model_id(gravity_model), attitude_update_id(attitude_update),
-        bool(fix_height), out,
+        t, dth, dv, pos0, np.asarray(initial.vel, float),
+        np.ascontiguousarray(initial.C, dtype=float), gid, aid, bool(fix_height), out,
     )
     df = pd.DataFrame(out, index=pd.Index(t, name="time"), columns=NAV_COLS)
     if return_final:
@@ -402,13 +244,23 @@ class INSMechanization:
     Feed one IMU sample at a time with :meth:`process_measurement`; the first
     ``alignment_time`` seconds are averaged for a static coarse alignment (levelling and
     gyrocompassing, :mod:`insgnss.align`), after which every sample advances the navigation
-    state with the same compiled :func:`strapdown_step` as :func:`mechanize`. Rates are turned
+    state with the same compiled :func:`strapdown_step` as :func:`mechanize` (or
+    :func:`~insgnss.mechanization.wander.wander_step` with ``frame="wander"``). Rates are turned
     into interval increments by the trapezoidal rule with the previous sample (seed eq. 25).
+
+    The seed's stages are available one by one for teaching and tests, as thin wrappers of the
+    compiled stages of :func:`strapdown_step` (ENU frame): :meth:`v_and_r_integration`,
+    :meth:`angular_velocity_compensation`, :meth:`attitude_integration`, called in that order
+    for one interval reproduce the step to rounding. Our step integrates velocity before
+    attitude (the reverse of the seed's 2.7 order) because the l-frame's rotation over the
+    interval depends on the velocity at its middle; with the start values, as in the seed, the
+    step is first order.
 
     Parameters
     ----------
     h0, lat0, long0 : float
-        Initial ellipsoidal height [m], latitude and longitude [rad].
+        Initial ellipsoidal height [m], latitude and longitude [rad]. A latitude beyond
+        +-pi/2 raises :class:`~insgnss.errors.InvalidValueError` (degrees given by mistake).
     accel_bias : float, 3-vector or callable
         Accelerometer bias [m/s^2]; a callable receives the local gravity [m/s^2] and returns it.
     gyro_bias : float or 3-vector
@@ -419,21 +271,31 @@ class INSMechanization:
         Non-orthogonality matrices [rad].
     alignment_time : float
         Duration of the static alignment [s].
-    gravity_model : {"grs80_series", "somigliana"}
-        The seed uses the GRS80 series (eq. 12), the default here.
+    gravity_model : str
+        One of :data:`insgnss.earth.GRAVITY_MODELS`; the seed uses the GRS80 series (eq. 12),
+        the default here.
     attitude_update : {"exact", "first_order"}
         Exact rotation-vector update, or the seed's first-order quaternion update (eq. 18).
+    frame : {"enu", "wander"}
+        Navigation frame; ``"wander"`` is regular over the poles. :meth:`get_params` reports
+        ENU quantities in both cases, plus ``wander_angle`` for the wander frame.
+    wander_angle : float
+        Initial wander angle [rad] for ``frame="wander"``.
     """
 
     def __init__(self, h0: float, lat0: float, long0: float, accel_bias=0.0, gyro_bias=0.0,
                  accel_sf=0.0, gyro_sf=0.0, accel_no=None, gyro_no=None,
                  alignment_time: float = 120.0, *, gravity_model: str = "grs80_series",
-                 attitude_update: str = "exact"):
+                 attitude_update: str = "exact", frame: str = "enu", wander_angle: float = 0.0):
+        check_latitude(lat0, "lat0")
         self.pos = np.array([lat0, long0, h0], float)
         self.vel = np.zeros(3)
         self.C = np.eye(3)
         self._gravity_id = earth.gravity_model_id(gravity_model)
         self._attitude_id = attitude_update_id(attitude_update)
+        self.frame = "wander" if frame_id(frame) == FRAME_WANDER else "enu"
+        self.wander_angle = float(wander_angle)
+        self._wander = None  # (C_w^e, [h], v^w, C_b^w) once aligned in the wander frame
         g = earth.normal_gravity(lat0, h0, self._gravity_id)
         self.accel_bias = np.broadcast_to(
             np.asarray(accel_bias(g) if callable(accel_bias) else accel_bias, float), (3,)).copy()
@@ -448,6 +310,8 @@ class INSMechanization:
         self._prev: np.ndarray | None = None  # last compensated sample (t, w, f)
         self.time = 0.0
         self._work = np.empty(STEP_WORK_SHAPE)
+        self._interval = None  # Earth terms and velocities of the last v_and_r_integration
+        self._nav = np.empty(10)
 
     # --- processing ---
     def compensate_errors_and_compute_params(self, measurement) -> np.ndarray:
@@ -474,10 +338,27 @@ class INSMechanization:
                 raise ValueError(f"time must increase: {prev[0]} -> {m[0]}")
             dth = 0.5 * (prev[1:4] + m[1:4]) * dt
             dv = 0.5 * (prev[4:7] + m[4:7]) * dt
-            strapdown_step(self.pos, self.vel, self.C, dth, dv, dt, self._gravity_id,
-                           self._attitude_id, False, self._work)
+            if self._wander is not None:
+                Cne, hv, vw, Cbw = self._wander
+                wander_step(Cne, hv, vw, Cbw, dth, dv, dt, self._gravity_id, self._attitude_id,
+                            False, self._work)
+                self._sync_from_wander()
+            else:
+                strapdown_step(self.pos, self.vel, self.C, dth, dv, dt, self._gravity_id,
+                               self._attitude_id, False, self._work)
         self._prev = m
         self.time = m[0]
+
+    def _sync_from_wander(self) -> None:
+        """ENU view (pos, vel, C, wander_angle) of the wander state."""
+        Cne, hv, vw, Cbw = self._wander
+        out = self._nav
+        wander_to_nav(Cne, hv[0], vw, Cbw, out)
+        self.pos[:] = out[0:3]
+        self.vel[:] = out[3:6]
+        self.wander_angle = float(out[9])
+        ca, sa = np.cos(out[9]), np.sin(out[9])
+        self.C = np.array([[ca, -sa, 0.0], [sa, ca, 0.0], [0.0, 0.0, 1.0]]) @ Cbw
 
     def align(self, measurement) -> None:
         """Accumulate a compensated sample for the static alignment; finish when the
@@ -493,6 +374,11 @@ class INSMechanization:
             heading = gyrocompass(mean[0:3], roll, pitch)
             self.C = self.get_rotation_matrix(roll, pitch, heading)
             self.alignment_complete = True
+            if self.frame == "wander":
+                Cne, h, vw, Cbw = wander_state(NavState(
+                    self.pos[0], self.pos[1], self.pos[2], self.vel.copy(), self.C,
+                    wander_angle=self.wander_angle))
+                self._wander = (Cne, np.array([h]), vw, Cbw)
 
     def get_params(self, degrees: bool = False) -> dict:
         """Current time, position, velocity, attitude and alignment status.
@@ -502,20 +388,92 @@ class INSMechanization:
         """
         k = 180.0 / np.pi if degrees else 1.0
         r, p, a = dcm_to_euler(self.C)
-        return {"time": self.time, "lat": self.pos[0] * k, "long": self.pos[1] * k,
-                "h": self.pos[2], "v_e": self.vel[0], "v_n": self.vel[1], "v_u": self.vel[2],
-                "roll": float(r) * k, "pitch": float(p) * k, "azimuth": float(a) * k,
-                "alignment_complete": self.alignment_complete}
+        out = {"time": self.time, "lat": self.pos[0] * k, "long": self.pos[1] * k,
+               "h": self.pos[2], "v_e": self.vel[0], "v_n": self.vel[1], "v_u": self.vel[2],
+               "roll": float(r) * k, "pitch": float(p) * k, "azimuth": float(a) * k,
+               "alignment_complete": self.alignment_complete}
+        if self.frame == "wander":
+            out["wander_angle"] = self.wander_angle * k
+        return out
+
+    # --- the seed's stages (sections 2.4-2.6) as wrappers of the compiled step ---
+    def _require_enu(self, name: str) -> None:
+        if self._wander is not None or self.frame != "enu":
+            raise ConfigError(f"{name} is a stage of the ENU (local-level) step of seed 000",
+                              column="frame", expected="enu", found=self.frame)
+
+    def v_and_r_integration(self, dtheta, dv, dt: float) -> tuple[np.ndarray, np.ndarray]:
+        """Velocity and position over one interval (seed section 2.6, eqs. 24-28).
+
+        Evaluates the Earth terms at the interval's predicted middle
+        (:func:`llf_earth_terms`), integrates the velocity with gravity, Coriolis and the
+        mid-interval attitude built from the *current* attitude and ``dtheta``
+        (:func:`~insgnss.mechanization.core.velocity_update`) and the position
+        (:func:`position_step`), and remembers the interval for
+        :meth:`angular_velocity_compensation`. ``dtheta``, ``dv`` are the compensated angular
+        and velocity increments [rad, m/s] of the interval ``dt`` [s]. Returns the new
+        ``(vel, pos)``.
+        """
+        self._require_enu("v_and_r_integration")
+        wie, K, th = np.empty(3), np.empty((3, 3)), np.empty(3)
+        g, lat_m, Rm, Rn = llf_earth_terms(self.pos[0], self.pos[2], self.vel, float(dt),
+                                           self._gravity_id, wie, K)
+        body_rotation(np.asarray(dtheta, float), self._attitude_id, th)
+        v0 = self.vel.copy()
+        velocity_update(self.vel, self.C, th, np.asarray(dv, float), float(dt), wie, K, g, False,
+                        self._work)
+        self.pos[0], self.pos[1], self.pos[2] = position_step(
+            self.pos[0], self.pos[1], self.pos[2], v0, self.vel, float(dt), lat_m, Rm, Rn)
+        self._interval = (float(dt), wie, K, v0, self.vel.copy())
+        return self.vel.copy(), self.pos.copy()
+
+    def angular_velocity_compensation(self, dtheta, dt: float) -> np.ndarray:
+        """Body rotation relative to the l-frame over the interval, ``theta_lb^b`` (seed section
+        2.4, eqs. 15-16).
+
+        ``theta_lb^b = log(C^T exp(-[zeta x]) C exp([dtheta x]))`` with the l-frame rotation
+        ``zeta = (w_ie^l + w_el^l) dt`` at mid-interval (:func:`~insgnss.mechanization.core.
+        nav_frame_rotation`), taken from the preceding :meth:`v_and_r_integration` of the same
+        interval; without one, at the current state (the seed's start-of-interval eq. 15). The
+        seed's ``dtheta - C_l^b w_il dt`` is the first-order form of the same quantity.
+        """
+        self._require_enu("angular_velocity_compensation")
+        th = np.empty(3)
+        body_rotation(np.asarray(dtheta, float), self._attitude_id, th)
+        if self._interval is not None and self._interval[0] == float(dt):
+            _, wie, K, v0, v1 = self._interval
+        else:
+            wie, K = np.empty(3), np.empty((3, 3))
+            llf_earth_terms(self.pos[0], self.pos[2], self.vel, float(dt), self._gravity_id,
+                            wie, K)
+            v0 = v1 = self.vel
+        zeta = np.empty(3)
+        nav_frame_rotation(wie, K, v0, v1, float(dt), zeta)
+        return attitude.dcm_to_rotvec(self.C.T @ attitude.rotvec_to_dcm(-zeta) @ self.C
+                                      @ attitude.rotvec_to_dcm(th))
+
+    def attitude_integration(self, theta_lb) -> tuple[float, float, float]:
+        """``C_b^l <- C_b^l exp([theta_lb x])`` (seed section 2.5; the exact form of the
+        quaternion update eqs. 17-18, which :meth:`angular_velocity_compensation` already
+        applied to ``dtheta`` when ``attitude_update="first_order"``). Returns the new
+        ``(roll, pitch, azimuth)`` [rad] (eqs. 19-21)."""
+        self._require_enu("attitude_integration")
+        self.C = self.C @ attitude.rotvec_to_dcm(np.asarray(theta_lb, float))
+        self._interval = None
+        r, p, a = dcm_to_euler(self.C)
+        return float(r), float(p), float(a)
 
     # --- accessory methods of seed section 2.8 ---
     @staticmethod
     def gravity(lat: float, h: float) -> float:
-        """Normal gravity [m/s^2] by the GRS80 series (seed eq. 12)."""
+        """Normal gravity [m/s^2] by the GRS80 series (seed eq. 12); ``lat`` in radians."""
+        check_latitude(lat, "lat")
         return earth.normal_gravity(lat, h, "grs80_series")
 
     @classmethod
     def radii_of_curvature(cls, lat: float) -> tuple[float, float]:
         """``(N, M)``: prime-vertical and meridian radii [m] (seed eqs. 13-14, seed order)."""
+        check_latitude(lat, "lat")
         M, N = radii(float(lat))
         return float(N), float(M)
 

@@ -70,10 +70,14 @@ import numpy as np
 import pandas as pd
 from scipy.interpolate import CubicSpline
 
-from ..earth import enu_to_geodetic, normal_gravity, radii
+from ..attitude import euler_to_dcm
+from ..earth import check_latitude, enu_to_geodetic, normal_gravity, radii
 from ..errors import ConfigError
+from ..mechanization.core import FRAME_WANDER, frame_id
 from ..mechanization.inverse import integrate_position
 from ..mechanization.strapdown import NAV_COLS
+from ..mechanization.wander import integrate_position_wander, wander_table
+from ..trajectory_tools import vne_to_rpy
 
 VEHICLES = ("land", "aircraft", "pedestrian")
 DEFAULT_RAMP = 0.25
@@ -289,14 +293,15 @@ def _vehicle_channels(tr: np.ndarray, plan: list[dict], speed0: float, heading0:
     return vh, psi, psid, vu, coord
 
 
-def _vehicle_attitude(vehicle, vh, vu, psid, coord, roll_gain, g):
-    pitch = np.arctan2(vu, vh)
-    a_lat = vh * psid
+def _vehicle_attitude(vehicle, vel, psid, coord, roll_gain, g):
+    """Roll and pitch of the vehicle models: pitch along the velocity, coordinated-turn bank
+    (:func:`insgnss.trajectory_tools.vne_to_rpy` with the analytic turn rate) for aircraft and
+    ``coordinated_turn`` segments, body roll ``-k a_lat`` for land vehicles."""
+    roll_c, pitch, _ = vne_to_rpy(vel, g=g, turn_rate=psid)
     if vehicle == "aircraft":
-        roll = np.arctan(a_lat / g)
-    else:
-        roll = np.where(coord, np.arctan(a_lat / g), -roll_gain * a_lat)
-    return roll, pitch
+        return roll_c, pitch
+    a_lat = np.hypot(vel[:, 0], vel[:, 1]) * psid
+    return np.where(coord, roll_c, -roll_gain * a_lat), pitch
 
 
 # --- pedestrian ---------------------------------------------------------------------------------
@@ -489,6 +494,8 @@ def generate(
     roll_gain: float = 0.0,
     duration: float | None = None,
     start_time: float = 0.0,
+    frame: str = "enu",
+    wander_angle: float = 0.0,
 ) -> Trajectory:
     """Generate a truth trajectory at the IMU rate.
 
@@ -528,6 +535,16 @@ def generate(
         continues the final state (constant velocity); a shorter one truncates.
     start_time : float
         Time stamp of the first sample [s].
+    frame : {"enu", "wander"}
+        ``"wander"`` (vehicle segments only) builds the route in the wander-azimuth frame
+        (:mod:`insgnss.mechanization.wander`): the course channel is the heading relative to
+        the wander frame, which does not turn about the vertical relative to the Earth, so a
+        segment without turns flies a geodesic, also straight over a pole; position is
+        integrated as ``C_w^e`` by the wander step's own rule
+        (:func:`~insgnss.mechanization.wander.integrate_position_wander`), and the truth gains
+        a ``wander_angle`` column. The ENU generator cannot pass a pole (``1/cos(lat)``).
+    wander_angle : float
+        Initial wander angle [rad] (``frame="wander"``); the initial heading is true heading.
 
     Returns
     -------
@@ -540,6 +557,11 @@ def generate(
         raise ConfigError("give exactly one of 'segments' and 'waypoints'", column="trajectory")
     if not rate > 0:
         raise ConfigError("rate must be positive", column="scenario.imu_rate", found=rate)
+    check_latitude(lat, "trajectory.lat")
+    wander = frame_id(frame) == FRAME_WANDER
+    if wander and (waypoints is not None or vehicle == "pedestrian"):
+        raise ConfigError("frame 'wander' is available for vehicle segment profiles only",
+                          column="trajectory.frame")
     g = normal_gravity(lat, height)
     seg_table: list[dict] = []
     if waypoints is not None:
@@ -559,7 +581,7 @@ def generate(
             psid[after] = 0.0
         coord = np.zeros(t.size, bool)
         roll, _ = _vehicle_attitude(vehicle if vehicle != "pedestrian" else "land",
-                                    vh, vu, psid, coord, roll_gain, g)
+                                    vel, psid, coord, roll_gain, g)
         pitch = pitch_wp
         lat0, lon0, h0 = wlat[0], wlon[0], wh[0]
         stationary = np.all(vel == 0.0, axis=1) & (psid == 0.0)
@@ -580,15 +602,22 @@ def generate(
             raise ConfigError("no segments", column="trajectory.segments")
         total = plan[-1]["stop"] if duration is None else float(duration)
         t = _time_grid(total, rate, start_time)
-        vh, psi, psid, vu, coord = _vehicle_channels(t - start_time, plan, speed, heading)
+        # course from north (ENU) or from the wander frame's y axis (A_w = A + alpha)
+        psi0 = heading + wander_angle if wander else heading
+        vh, psi, psid, vu, coord = _vehicle_channels(t - start_time, plan, speed, psi0)
         vel = np.empty((t.size, 3))
         np.multiply(vh, np.sin(psi), out=vel[:, 0])
         np.multiply(vh, np.cos(psi), out=vel[:, 1])
         vel[:, 2] = vu
-        roll, pitch = _vehicle_attitude(vehicle, vh, vu, psid, coord, roll_gain, g)
+        roll, pitch = _vehicle_attitude(vehicle, vel, psid, coord, roll_gain, g)
         stationary = (vh == 0.0) & (vu == 0.0) & (psid == 0.0)
         lat0, lon0, h0 = lat, lon, height
         seg_table = [{k: p[k] for k in ("type", "start", "stop", "duration")} for p in plan]
+    if wander:
+        Cne, hw = integrate_position_wander(t, vel, lat0, lon0, h0, wander_angle)
+        truth = wander_table(t, Cne, hw, vel, euler_to_dcm(roll, pitch, psi))
+        truth["stationary"] = stationary.astype(float)
+        return Trajectory(truth=truth, vehicle=vehicle, segments=seg_table)
     pos = integrate_position(t, vel, lat0, lon0, h0)
     heading_out = np.mod(psi, 2.0 * np.pi)
     data = np.empty((t.size, 10))
