@@ -105,10 +105,16 @@ def llh_to_vne(llh, t=None, *, vel0=None, method: str = "trapezoid"):
     elif method == "trapezoid":
         vel = np.empty((t.size, 3))
         if vel0 is None:
-            _trapezoid_inverse(t, lat, dlon, h, np.zeros(3), vel)
-            dw = np.diff(vel, axis=0)
+            # remove the alternating mode; repeated because the mid-point radii make the
+            # recursion slightly nonlinear in the initial velocity
+            v0 = np.zeros(3)
             sign = (-1.0) ** np.arange(1, t.size)
-            v0 = -(sign[:, None] * dw).sum(axis=0) / (2.0 * dw.shape[0])
+            for _ in range(5):
+                _trapezoid_inverse(t, lat, dlon, h, v0, vel)
+                c = -(sign[:, None] * np.diff(vel, axis=0)).sum(axis=0) / (2.0 * (t.size - 1))
+                v0 = v0 + c
+                if np.abs(c).max() < 1e-12:
+                    break
         else:
             v0 = np.asarray(vel0, float).reshape(3)
         _trapezoid_inverse(t, lat, dlon, h, v0, vel)

@@ -204,3 +204,87 @@ def test_cross_check_with_pyins():
                           "height": theirs["alt"].to_numpy()})
     err = enu_error(th_df.iloc[-1:], ours.iloc[-1:])
     assert np.linalg.norm(err) < 0.01
+
+
+@pytest.mark.parametrize("update", ["exact", "first_order"])
+def test_seed_stage_methods_reproduce_strapdown_step(update):
+    """v_and_r_integration, angular_velocity_compensation, attitude_integration (seed 000
+    sections 2.4-2.6) called per interval reproduce the compiled step."""
+    from insgnss.mechanization.strapdown import STEP_WORK_SHAPE, strapdown_step
+
+    traj = dynamic_trajectory(20.0, 100.0)
+    imu = inverse_mechanize(traj, attitude_update=update)
+    x0 = initial_state(traj)
+    ins = INSMechanization(x0.height, x0.lat, x0.lon, gravity_model="somigliana",
+                           attitude_update=update)
+    ins.vel, ins.C = x0.vel.copy(), x0.C.copy()
+    pos, vel, C = np.array([x0.lat, x0.lon, x0.height]), x0.vel.copy(), x0.C.copy()
+    work = np.empty(STEP_WORK_SHAPE)
+    t = imu.index.to_numpy()
+    inc = imu.to_numpy()
+    for k in range(1, len(t)):
+        dt = t[k] - t[k - 1]
+        dth, dv = inc[k, :3], inc[k, 3:]
+        strapdown_step(pos, vel, C, dth, dv, dt, 0, 0 if update == "exact" else 1, False, work)
+        v1, p1 = ins.v_and_r_integration(dth, dv, dt)
+        th_lb = ins.angular_velocity_compensation(dth, dt)
+        r, p, a = ins.attitude_integration(th_lb)
+    # the same compiled stages; exp(theta_lb) vs exp(-zeta) C exp(theta) differ by rounding
+    assert np.abs(enu_error(pd.DataFrame([ins.pos], columns=["lat", "lon", "height"]),
+                            pd.DataFrame([pos], columns=["lat", "lon", "height"]))).max() < 1e-9
+    assert np.abs(ins.vel - vel).max() < 1e-11
+    assert np.abs(ins.C - C).max() < 1e-13
+    # theta_lb is the body rotation relative to the l-frame: about dtheta - C^T w_il dt
+    assert np.abs(th_lb - dth).max() > 1e-9
+    out = mechanize(imu, x0, attitude_update=update)
+    assert (r, p, a) == pytest.approx(tuple(out[["roll", "pitch", "heading"]].iloc[-1]), abs=1e-12)
+
+
+def test_seed_angular_velocity_compensation_alone_is_the_seed_eq16():
+    """Without a preceding v_and_r_integration it uses the current state (seed eq. 15-16)."""
+    lat = np.radians(50.0)
+    ins = INSMechanization(0.0, lat, 0.0)
+    ins.vel = np.array([20.0, 5.0, 0.0])
+    ins.C = euler_to_dcm(0.1, 0.05, 1.0)
+    dth = np.array([1e-4, -2e-4, 3e-4])
+    th = ins.angular_velocity_compensation(dth, 0.01)
+    M, N = radii(lat)
+    w_il = np.array([-5.0 / M, 20.0 / N + 7.2921151467e-5 * np.cos(lat),
+                     20.0 * np.tan(lat) / N + 7.2921151467e-5 * np.sin(lat)])
+    # equal to second order (BCH term dtheta x C^T w_il dt / 2 ~ 1e-10)
+    assert np.abs(th - (dth - ins.C.T @ w_il * 0.01)).max() < 3e-10
+
+
+@pytest.mark.parametrize("call", [
+    lambda: NavState.from_euler(45.07, 7.68, 240, heading=30),
+    lambda: NavState(52.38, 0.17, 10.0),
+    lambda: INSMechanization(60, 52.38, 9.72),
+    lambda: INSMechanization.gravity(45.0, 0.0),
+    lambda: INSMechanization.radii_of_curvature(-60.0),
+])
+def test_latitude_in_degrees_is_rejected(call):
+    from insgnss.errors import InsgnssError
+
+    with pytest.raises(InsgnssError, match="looks like degrees"):
+        call()
+
+
+def test_latitude_in_degrees_rejected_by_batch_entry_points():
+    from insgnss.errors import InsgnssError
+    from insgnss.mechanization.inverse import integrate_position
+
+    traj = dynamic_trajectory(2.0, 10.0)
+    bad = traj.copy()
+    bad["lat"] = np.degrees(bad["lat"])
+    with pytest.raises(InsgnssError, match="row 1.*looks like degrees|looks like degrees"):
+        inverse_mechanize(bad)
+    with pytest.raises(InsgnssError, match="looks like degrees"):
+        integrate_position([0.0, 1.0], np.zeros((2, 3)), 45.0, 7.0, 0.0)
+    x0 = initial_state(traj)
+    x0.lat = 45.0  # mutated after construction
+    with pytest.raises(InsgnssError, match="looks like degrees"):
+        mechanize(inverse_mechanize(traj), x0)
+    with pytest.raises(InsgnssError, match="not a latitude"):
+        NavState(400.0, 0.0, 0.0)
+    # the pole itself is a latitude
+    assert NavState(np.pi / 2, 0.0, 0.0).lat == np.pi / 2
