@@ -46,14 +46,25 @@ GRS80_A4 = -0.000003087691089
 GRS80_A5 = 0.000000004397731
 GRS80_A6 = 0.000000000000721
 
+# seed 004 eqs. 6-7: international gravity formula on the ellipsoid, inverse-square in height
+IGF_G0 = 9.780327
+IGF_B1 = 0.0053024
+IGF_B2 = 0.0000058
+# zonal harmonic J2 of WGS84 (-sqrt(5) C20, C20 = -4.84166774985e-4)
+J2 = 1.082629821313e-3
+
 #: gravity model identifiers used by the compiled kernels
 GRAVITY_SOMIGLIANA = 0
 GRAVITY_GRS80_SERIES = 1
-GRAVITY_MODELS = {"somigliana": GRAVITY_SOMIGLIANA, "grs80_series": GRAVITY_GRS80_SERIES}
+GRAVITY_INVERSE_SQUARE = 2
+GRAVITY_J2 = 3
+#: the normal gravity models, selectable wherever a ``gravity_model`` is taken
+GRAVITY_MODELS = {"somigliana": GRAVITY_SOMIGLIANA, "grs80_series": GRAVITY_GRS80_SERIES,
+                  "inverse_square": GRAVITY_INVERSE_SQUARE, "j2": GRAVITY_J2}
 
 
 def gravity_model_id(name: str | int) -> int:
-    """Map a gravity model name (``"somigliana"`` or ``"grs80_series"``) to its kernel id."""
+    """Map a gravity model name (a key of :data:`GRAVITY_MODELS`) to its kernel id."""
     if isinstance(name, int | np.integer) and int(name) in GRAVITY_MODELS.values():
         return int(name)
     try:
@@ -111,10 +122,56 @@ def gravity_grs80_series(lat, h):
 
 
 @njit(cache=True)
+def gravity_inverse_square(lat, h):
+    """Normal gravity [m/s^2] of seed 004 eqs. 6-7: the international gravity formula on the
+    ellipsoid, ``g0 = 9.780327 (1 + 0.0053024 sin^2 lat - 0.0000058 sin^2 2 lat)``, decreasing
+    with the inverse square of the distance from a centre at the Gaussian mean radius of
+    curvature ``R_G = sqrt(M N)`` below the surface: ``g = g0 R_G^2 / (R_G + h)^2``.
+
+    (The seed prints ``R_G = 6367.449 km``, which is the rectifying radius, and adds the height
+    in km; the physics is the geometric mean radius of the point, as in its section 5.)
+    Within 2.2e-6 m/s^2 of Somigliana at the surface; its free-air gradient ``2 g / R_G`` is
+    0.34 % below the normal one.
+    """
+    s2 = np.sin(lat) ** 2
+    w = 1.0 - E2 * s2
+    N = A / np.sqrt(w)
+    R = N * np.sqrt((1.0 - E2) / w)  # sqrt(M N)
+    g0 = IGF_G0 * (1.0 + IGF_B1 * s2 - IGF_B2 * 4.0 * s2 * (1.0 - s2))  # sin^2 2L = 4 s2 c2
+    q = R / (R + h)
+    return g0 * q * q
+
+
+@njit(cache=True)
+def gravity_j2(lat, h):
+    """Normal gravity [m/s^2] of the J2 field (seed 004 eq. 9 done as in Groves eq. 2.142):
+    gravitation ``-GM/r^3 (r + 3/2 J2 a^2/r^2 ((1 - 5 z^2/r^2) x, (1 - 5 z^2/r^2) y,
+    (3 - 5 z^2/r^2) z))`` plus the centrifugal ``w_ie^2 (x, y, 0)``, projected on the ellipsoid
+    normal (the small deflection from the normal is not used by a mechanization). Within
+    1.2e-4 m/s^2 of Somigliana (the neglected J4 and higher terms).
+    """
+    sl, cl = np.sin(lat), np.cos(lat)
+    N = A / np.sqrt(1.0 - E2 * sl * sl)
+    x = (N + h) * cl
+    z = (N * (1.0 - E2) + h) * sl
+    r2 = x * x + z * z
+    r = np.sqrt(r2)
+    k = 1.5 * J2 * A * A / r2
+    zr = z * z / r2
+    gx = -GM / (r2 * r) * x * (1.0 + k * (1.0 - 5.0 * zr)) + OMEGA_E * OMEGA_E * x
+    gz = -GM / (r2 * r) * z * (1.0 + k * (3.0 - 5.0 * zr))
+    return -(gx * cl + gz * sl)
+
+
+@njit(cache=True)
 def normal_gravity_id(lat, h, model):
     """Normal gravity [m/s^2] for a kernel model id (see :data:`GRAVITY_MODELS`)."""
     if model == GRAVITY_GRS80_SERIES:
         return gravity_grs80_series(lat, h)
+    if model == GRAVITY_INVERSE_SQUARE:
+        return gravity_inverse_square(lat, h)
+    if model == GRAVITY_J2:
+        return gravity_j2(lat, h)
     return gravity_somigliana(lat, h)
 
 
@@ -125,16 +182,17 @@ def normal_gravity(lat, h, model: str | int = "somigliana"):
     ----------
     lat, h : float or array_like
         Geodetic latitude [rad] and ellipsoidal height [m].
-    model : {"somigliana", "grs80_series"}
-        Somigliana closed form with height correction (default) or the seed's GRS80 series.
+    model : str
+        ``"somigliana"`` (default: closed form with the second-order height correction),
+        ``"grs80_series"`` (seed 000 eq. 12), ``"inverse_square"`` (seed 004 eqs. 6-7) or
+        ``"j2"`` (seed 004 eq. 9, the J2 gravitational field with the centrifugal term).
     """
-    lat = np.asarray(lat, dtype=float)
-    h = np.asarray(h, dtype=float)
-    if gravity_model_id(model) == GRAVITY_GRS80_SERIES:
-        out = gravity_grs80_series(lat, h)
-    else:
-        out = gravity_somigliana(lat, h)
-    return float(out) if np.ndim(out) == 0 else out
+    mid = gravity_model_id(model)
+    lat, h = np.asarray(lat, dtype=float), np.asarray(h, dtype=float)
+    if lat.ndim == 0 and h.ndim == 0:
+        return float(normal_gravity_id(float(lat), float(h), mid))
+    lat, h = (np.ascontiguousarray(a) for a in np.broadcast_arrays(lat, h))
+    return normal_gravity_id(lat, h, mid)
 
 
 @njit(cache=True)

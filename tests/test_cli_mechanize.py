@@ -70,3 +70,24 @@ def test_every_command_has_help():
     for name, p in sub.choices.items():
         text = p.format_help()
         assert name in text and len(text) > 200
+
+
+def test_mechanize_cli_wander_frame_and_gravity_model(tmp_path):
+    src = tmp_path / "imu.csv"
+    _write_frd_csv(src, duration=130.0)
+    out = tmp_path / "traj.csv"
+    rc = main(["mechanize", str(src), "--lat", "45", "--lon", "0", "--height", "200",
+               "--gyro-unit", "deg/s", "--accel-unit", "g", "--time-unit", "ms",
+               "--axis-map", "y,x,-z", "--align", "120", "--frame", "wander",
+               "--wander-angle", "30", "--gravity-model", "somigliana", "-o", str(out)])
+    assert rc == 0
+    traj = read_table(out)
+    assert "wander_angle" in traj.columns  # read back to radians from wander_angle_deg
+    assert np.degrees(traj["wander_angle"].iloc[0]) == pytest.approx(30.0, abs=1e-9)
+    assert np.degrees(traj["heading"].iloc[0]) == pytest.approx(40.0, abs=1e-3)
+    assert np.abs(traj[["vel_e", "vel_n", "vel_u"]].to_numpy()).max() < 1e-3
+    for bad in (["--frame", "ned"], ["--gravity-model", "wgs72"]):
+        r = subprocess.run([sys.executable, "-m", "insgnss.cli", "mechanize", str(src), "--lat",
+                            "45", "--lon", "0", "--attitude", "0,0,0", "-o",
+                            str(tmp_path / "o.csv"), *bad], capture_output=True, text=True)
+        assert r.returncode == 2 and "Traceback" not in r.stderr and bad[1] in r.stderr

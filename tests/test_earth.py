@@ -24,6 +24,55 @@ def test_gravity_models_agree_and_height_gradient():
     assert grad / 100.0 == pytest.approx(-3.086e-6, rel=0.01)
 
 
+def test_inverse_square_gravity_seed_004():
+    """Seed 004 eqs. 6-7 with the Gaussian mean radius, at Tehran (35.6892 N, 1190 m)."""
+    lat, h = np.radians(35.6892), 1190.0
+    g0 = 9.780327 * (1 + 0.0053024 * np.sin(lat) ** 2 - 0.0000058 * np.sin(2 * lat) ** 2)
+    M, N = earth.radii(lat)
+    R = np.sqrt(M * N)
+    assert earth.normal_gravity(lat, h, "inverse_square") == pytest.approx(
+        g0 * R**2 / (R + h) ** 2, abs=1e-12)
+    assert earth.normal_gravity(lat, h, "inverse_square") == pytest.approx(9.794267, abs=1e-6)
+    grid = np.radians(np.linspace(-90, 90, 181))
+    d = earth.normal_gravity(grid, 0.0, "inverse_square") - earth.normal_gravity(grid, 0.0)
+    assert np.abs(d).max() < 2.5e-6
+    # its free-air gradient 2 g / R_G is 0.34 % below the normal one
+    grad = (earth.normal_gravity(lat, 100.0, "inverse_square")
+            - earth.normal_gravity(lat, -100.0, "inverse_square")) / 200.0
+    ref = (earth.normal_gravity(lat, 100.0) - earth.normal_gravity(lat, -100.0)) / 200.0
+    assert grad / ref - 1 == pytest.approx(-0.0034, abs=0.0002)
+
+
+def test_j2_gravity_is_the_gradient_of_the_j2_potential():
+    """-dW/dh of W = GM/r (1 - J2 (a/r)^2 P2(sin psi)) + w^2 p^2 / 2 along the ellipsoid
+    normal equals the J2 model (an independent route to the same field)."""
+    def W(lat, h):
+        x, _, z = earth.geodetic_to_ecef(lat, 0.0, h)
+        r = np.hypot(x, z)
+        p2 = 1.5 * (z / r) ** 2 - 0.5
+        return earth.GM / r * (1 - earth.J2 * (earth.A / r) ** 2 * p2) + 0.5 * earth.OMEGA_E**2 * x * x
+
+    for lat_deg, h in [(0.0, 0.0), (35.6892, 1190.0), (60.0, 10000.0), (89.0, 0.0)]:
+        lat = np.radians(lat_deg)
+        g = -(W(lat, h + 50.0) - W(lat, h - 50.0)) / 100.0
+        assert earth.normal_gravity(lat, h, "j2") == pytest.approx(g, abs=2e-9)
+    # equator: GM/a^2 (1 + 3/2 J2) - w^2 a
+    assert earth.normal_gravity(0.0, 0.0, "j2") == pytest.approx(
+        earth.GM / earth.A**2 * (1 + 1.5 * earth.J2) - earth.OMEGA_E**2 * earth.A, abs=1e-12)
+    grid = np.radians(np.linspace(-90, 90, 181))
+    d = earth.normal_gravity(grid, 0.0, "j2") - earth.normal_gravity(grid, 0.0)
+    assert 5e-5 < np.abs(d).max() < 1.3e-4  # the J4 and higher terms of the normal field
+
+
+def test_every_gravity_model_is_selectable_by_name_and_id():
+    for name, i in earth.GRAVITY_MODELS.items():
+        assert earth.gravity_model_id(name) == i == earth.gravity_model_id(i)
+        assert 9.78 < earth.normal_gravity(0.5, 0.0, name) < 9.84
+        assert earth.normal_gravity(0.5, 0.0, i) == earth.normal_gravity_id(0.5, 0.0, i)
+    with pytest.raises(ValueError, match="unknown gravity model"):
+        earth.gravity_model_id("wgs72")
+
+
 def test_radii_known_values():
     M, N = earth.radii(0.0)
     assert N == pytest.approx(earth.A)

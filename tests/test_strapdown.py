@@ -51,6 +51,17 @@ def test_schuler_oscillation_period():
     assert np.hypot(err[:, 0], err[:, 1]).max() < 1.1 * 2 * 0.1 / ws
 
 
+@pytest.mark.parametrize("model", ["grs80_series", "inverse_square", "j2"])
+def test_stationary_with_each_gravity_model(model):
+    """The model reaches the step: sensors built with it keep the state at rest (and with a
+    different model they do not)."""
+    imu, x0 = static_increments(600.0, 100.0, LAT45, h=500.0, gravity_model=model)
+    out = mechanize(imu, x0, gravity_model=model, fix_height=False)
+    assert np.abs(out["vel_u"].to_numpy()).max() < 1e-9
+    other = mechanize(imu, x0, gravity_model="somigliana")
+    assert np.abs(other["vel_u"].to_numpy()).max() > 1e-7
+
+
 def test_accelerometer_bias_error_growth():
     imu, x0 = static_increments(60.0, 100.0, LAT45)
     b = 1e-3  # m/s^2 on body x (= east at heading 0)

@@ -3,7 +3,9 @@
 Reads an IMU CSV with declared units and sensor-to-body mounting, aligns over a static window
 (levelling + gyrocompassing, or a given heading) or takes a given initial attitude, runs the
 strapdown mechanization and writes the trajectory CSV (insgnss native table: time [s], lat_deg,
-lon_deg, height [m], vel_e/n/u [m/s], roll_deg, pitch_deg, heading_deg) and a figure.
+lon_deg, height [m], vel_e/n/u [m/s], roll_deg, pitch_deg, heading_deg; with ``--frame wander``
+also wander_angle_deg) and a figure. ``--frame wander`` mechanizes in the wander-azimuth frame,
+which also works over the poles (docs/mechanization.md).
 
 Example:
   insgnss mechanize imu.csv --lat 51.08 --lon -114.13 --height 1100 --align 120 \\
@@ -62,7 +64,15 @@ def register(p: argparse.ArgumentParser) -> None:
                    help="IMU grade for the stillness test and accuracy: navigation, tactical, "
                    "consumer")
     g = p.add_argument_group("mechanization")
-    g.add_argument("--gravity-model", default="somigliana", choices=["somigliana", "grs80_series"])
+    # names checked in run() against insgnss.earth.GRAVITY_MODELS / mechanization.core.FRAMES
+    # (kept out of the CLI start-up)
+    g.add_argument("--gravity-model", default="somigliana",
+                   help="normal gravity: somigliana, grs80_series, inverse_square, j2")
+    g.add_argument("--frame", default="enu",
+                   help="navigation frame: enu (local level) or wander (wander azimuth, "
+                   "works over the poles)")
+    g.add_argument("--wander-angle", type=float, default=0.0, metavar="DEG",
+                   help="initial wander angle [deg] (--frame wander)")
     g.add_argument("--attitude-update", default="exact", choices=["exact", "first_order"])
     g.add_argument("--coning", action="store_true", help="two-sample coning/sculling")
     g.add_argument("--fix-height", action="store_true",
@@ -72,13 +82,19 @@ def register(p: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from ..align import coarse_align
+    from ..earth import GRAVITY_MODELS
     from ..errors import ConfigError
     from ..imu import grade
     from ..io.imu_csv import read_imu_csv
     from ..io.native import write_table
+    from ..mechanization.core import frame_id
     from ..mechanization.strapdown import NavState, mechanize
     from ..validate import ensure_not_input
 
+    if args.gravity_model not in GRAVITY_MODELS:
+        raise ConfigError("unknown gravity model", column="--gravity-model",
+                          expected=sorted(GRAVITY_MODELS), found=args.gravity_model)
+    frame_id(args.frame)  # ConfigError for an unknown frame
     ensure_not_input(args.output, [args.imu])
     if args.figure is not None:
         ensure_not_input(args.figure, [args.imu])
@@ -105,9 +121,10 @@ def run(args: argparse.Namespace) -> int:
     else:
         r, p_, h = np.radians(args.attitude)
         x0 = NavState.from_euler(lat, lon, args.height, (0, 0, 0), r, p_, h, time=t0)
+    x0.wander_angle = float(np.radians(args.wander_angle))
     traj = mechanize(imu, x0, gravity_model=args.gravity_model,
                      attitude_update=args.attitude_update, coning=args.coning,
-                     fix_height=args.fix_height)
+                     fix_height=args.fix_height, frame=args.frame)
     write_table(traj, args.output)
     print(f"wrote {len(traj)} epochs to {args.output}")
     if args.figure is not None:

@@ -26,7 +26,7 @@ os.umask(_UMASK)
 
 #: DataFrame columns (radians) written in degrees with a ``_deg`` suffix
 ANGLE_COLUMNS = ("lat", "lon", "roll", "pitch", "heading", "roll_std", "pitch_std",
-                 "heading_std", "yaw", "yaw_std")
+                 "heading_std", "yaw", "yaw_std", "wander_angle")
 
 
 def atomic_write(path: str | os.PathLike, write: Callable[[Path], None]) -> Path:

@@ -32,6 +32,7 @@ import numpy as np
 import pandas as pd
 
 from .. import __version__
+from ..earth import GRAVITY_MODELS
 from ..errors import ConfigError
 from ..imu import ImuErrorModel, grade
 from ..io.native import atomic_write_text, jsonable, write_table
@@ -446,7 +447,7 @@ def simulate_scenario(source: str | os.PathLike | dict, seed: int | None = None,
                                       np.random.SeedSequence(seed).spawn(len(SEED_STREAMS))),
                        strict=True))
     rate = sc.num("imu_rate", required=True, positive=True)
-    gravity_model = sc.string("gravity_model", "somigliana", ("somigliana", "grs80_series"))
+    gravity_model = sc.string("gravity_model", "somigliana", tuple(GRAVITY_MODELS))
     start_time = sc.num("start_time", 0.0)
 
     # trajectory
