@@ -75,16 +75,18 @@ def gravity_model_id(name: str | int) -> int:
         ) from None
 
 
-def check_latitude(lat, where: str = "lat") -> None:
+def check_latitude(lat, where: str = "lat", allow_nan: bool = False) -> None:
     """Raise :class:`~insgnss.errors.InvalidValueError` unless every latitude is finite and in
     [-pi/2, pi/2] radians.
 
     A value outside that range but within +-90 is almost certainly given in degrees; the message
     says so (``NavState.from_euler(45.07, ...)`` would otherwise run at a latitude of 45 rad).
-    ``where`` names the argument or column in the message.
+    ``where`` names the argument or column in the message. ``allow_nan`` lets NaN through (a
+    state container that may hold the non-finite state of a diverged filter).
     """
     a = np.asarray(lat, dtype=float)
-    bad = ~np.isfinite(a) | (np.abs(a) > 0.5 * np.pi + 1e-12)
+    bad = np.abs(a) > 0.5 * np.pi + 1e-12
+    bad |= np.isinf(a) if allow_nan else ~np.isfinite(a)
     if not np.any(bad):
         return
     i = int(np.flatnonzero(bad.ravel())[0])
