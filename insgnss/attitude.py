@@ -192,10 +192,9 @@ def rotvec_to_dcm(phi) -> np.ndarray:
     return np.eye(3) + s * K + c * (K @ K)
 
 
-@njit(cache=True)
-def rotvec_to_dcm_nb(phi, out):
-    """Compiled Rodrigues formula for one rotation vector, written into ``out`` (3x3)."""
-    x, y, z = phi[0], phi[1], phi[2]
+@njit(cache=True, inline="always")
+def rotvec_xyz_to_dcm_nb(x, y, z, out):
+    """Compiled Rodrigues formula for the rotation vector ``(x, y, z)``, written into ``out``."""
     a2 = x * x + y * y + z * z
     if a2 < 1e-16:
         s = 1.0 - a2 / 6.0
@@ -214,6 +213,12 @@ def rotvec_to_dcm_nb(phi, out):
     out[2, 0] = -s * y + c * x * z
     out[2, 1] = s * x + c * y * z
     out[2, 2] = 1.0 - c * (x * x + y * y)
+
+
+@njit(cache=True)
+def rotvec_to_dcm_nb(phi, out):
+    """Compiled Rodrigues formula for one rotation vector, written into ``out`` (3x3)."""
+    rotvec_xyz_to_dcm_nb(phi[0], phi[1], phi[2], out)
 
 
 def dcm_to_rotvec(C) -> np.ndarray:

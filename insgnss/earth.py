@@ -100,11 +100,8 @@ def check_latitude(lat, where: str = "lat", allow_nan: bool = False) -> None:
     raise InvalidValueError(msg, column=where, row=row, expected="radians in [-pi/2, pi/2]")
 
 
-@njit(cache=True)
-def gravity_somigliana(lat, h):
-    """Normal gravity magnitude [m/s^2]: Somigliana closed form on the ellipsoid with the
-    second-order free-air height correction (Groves eqs. 2.134 and 2.139)."""
-    s2 = np.sin(lat) ** 2
+@njit(cache=True, inline="always")
+def _somigliana(s2, h):
     g0 = GAMMA_E * (1.0 + K_SOMIGLIANA * s2) / np.sqrt(1.0 - E2 * s2)
     return g0 * (
         1.0 - 2.0 / A * (1.0 + F + M_RATIO - 2.0 * F * s2) * h + 3.0 * h * h / (A * A)
@@ -112,15 +109,36 @@ def gravity_somigliana(lat, h):
 
 
 @njit(cache=True)
-def gravity_grs80_series(lat, h):
-    """Normal gravity magnitude [m/s^2] by the GRS80 series of seed 000 eq. 12:
-    ``g = a1 (1 + a2 sin^2 phi + a3 sin^4 phi) + (a4 + a5 sin^2 phi) h + a6 h^2``."""
-    s2 = np.sin(lat) ** 2
+def gravity_somigliana(lat, h):
+    """Normal gravity magnitude [m/s^2]: Somigliana closed form on the ellipsoid with the
+    second-order free-air height correction (Groves eqs. 2.134 and 2.139)."""
+    return _somigliana(np.sin(lat) ** 2, h)
+
+
+@njit(cache=True, inline="always")
+def _grs80_series(s2, h):
     return (
         GRS80_A1 * (1.0 + GRS80_A2 * s2 + GRS80_A3 * s2 * s2)
         + (GRS80_A4 + GRS80_A5 * s2) * h
         + GRS80_A6 * h * h
     )
+
+
+@njit(cache=True)
+def gravity_grs80_series(lat, h):
+    """Normal gravity magnitude [m/s^2] by the GRS80 series of seed 000 eq. 12:
+    ``g = a1 (1 + a2 sin^2 phi + a3 sin^4 phi) + (a4 + a5 sin^2 phi) h + a6 h^2``."""
+    return _grs80_series(np.sin(lat) ** 2, h)
+
+
+@njit(cache=True, inline="always")
+def _inverse_square(s2, h):
+    w = 1.0 - E2 * s2
+    N = A / np.sqrt(w)
+    R = N * np.sqrt((1.0 - E2) / w)  # sqrt(M N)
+    g0 = IGF_G0 * (1.0 + IGF_B1 * s2 - IGF_B2 * 4.0 * s2 * (1.0 - s2))  # sin^2 2L = 4 s2 c2
+    q = R / (R + h)
+    return g0 * q * q
 
 
 @njit(cache=True)
@@ -135,24 +153,11 @@ def gravity_inverse_square(lat, h):
     Within 2.2e-6 m/s^2 of Somigliana at the surface; its free-air gradient ``2 g / R_G`` is
     0.34 % below the normal one.
     """
-    s2 = np.sin(lat) ** 2
-    w = 1.0 - E2 * s2
-    N = A / np.sqrt(w)
-    R = N * np.sqrt((1.0 - E2) / w)  # sqrt(M N)
-    g0 = IGF_G0 * (1.0 + IGF_B1 * s2 - IGF_B2 * 4.0 * s2 * (1.0 - s2))  # sin^2 2L = 4 s2 c2
-    q = R / (R + h)
-    return g0 * q * q
+    return _inverse_square(np.sin(lat) ** 2, h)
 
 
-@njit(cache=True)
-def gravity_j2(lat, h):
-    """Normal gravity [m/s^2] of the J2 field (seed 004 eq. 9 done as in Groves eq. 2.142):
-    gravitation ``-GM/r^3 (r + 3/2 J2 a^2/r^2 ((1 - 5 z^2/r^2) x, (1 - 5 z^2/r^2) y,
-    (3 - 5 z^2/r^2) z))`` plus the centrifugal ``w_ie^2 (x, y, 0)``, projected on the ellipsoid
-    normal (the small deflection from the normal is not used by a mechanization). Within
-    1.2e-4 m/s^2 of Somigliana (the neglected J4 and higher terms).
-    """
-    sl, cl = np.sin(lat), np.cos(lat)
+@njit(cache=True, inline="always")
+def _j2(sl, cl, h):
     N = A / np.sqrt(1.0 - E2 * sl * sl)
     x = (N + h) * cl
     z = (N * (1.0 - E2) + h) * sl
@@ -166,15 +171,33 @@ def gravity_j2(lat, h):
 
 
 @njit(cache=True)
+def gravity_j2(lat, h):
+    """Normal gravity [m/s^2] of the J2 field (seed 004 eq. 9 done as in Groves eq. 2.142):
+    gravitation ``-GM/r^3 (r + 3/2 J2 a^2/r^2 ((1 - 5 z^2/r^2) x, (1 - 5 z^2/r^2) y,
+    (3 - 5 z^2/r^2) z))`` plus the centrifugal ``w_ie^2 (x, y, 0)``, projected on the ellipsoid
+    normal (the small deflection from the normal is not used by a mechanization). Within
+    1.2e-4 m/s^2 of Somigliana (the neglected J4 and higher terms).
+    """
+    return _j2(np.sin(lat), np.cos(lat), h)
+
+
+@njit(cache=True, inline="always")
+def normal_gravity_sc(s, c, h, model):
+    """Normal gravity [m/s^2] for a kernel model id from ``sin(lat)``, ``cos(lat)`` (the
+    kernels have them; no trigonometry here)."""
+    if model == GRAVITY_GRS80_SERIES:
+        return _grs80_series(s * s, h)
+    if model == GRAVITY_INVERSE_SQUARE:
+        return _inverse_square(s * s, h)
+    if model == GRAVITY_J2:
+        return _j2(s, c, h)
+    return _somigliana(s * s, h)
+
+
+@njit(cache=True)
 def normal_gravity_id(lat, h, model):
     """Normal gravity [m/s^2] for a kernel model id (see :data:`GRAVITY_MODELS`)."""
-    if model == GRAVITY_GRS80_SERIES:
-        return gravity_grs80_series(lat, h)
-    if model == GRAVITY_INVERSE_SQUARE:
-        return gravity_inverse_square(lat, h)
-    if model == GRAVITY_J2:
-        return gravity_j2(lat, h)
-    return gravity_somigliana(lat, h)
+    return normal_gravity_sc(np.sin(lat), np.cos(lat), h, model)
 
 
 def normal_gravity(lat, h, model: str | int = "somigliana"):

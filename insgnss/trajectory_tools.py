@@ -25,7 +25,7 @@ from numba import njit
 from .attitude import wrap_pi
 from .earth import check_latitude, normal_gravity, radii
 from .errors import InvalidValueError
-from .mechanization.strapdown import mid_position
+from .mechanization.strapdown import llf_mid_point
 
 VEL_COLS = ["vel_e", "vel_n", "vel_u"]
 
@@ -38,10 +38,9 @@ def _trapezoid_inverse(t, lat, dlon, h, v0, out):
     out[0, 0], out[0, 1], out[0, 2] = v0[0], v0[1], v0[2]
     for k in range(1, t.shape[0]):
         dt = t[k] - t[k - 1]
-        lat_m, h_m = mid_position(lat[k - 1], h[k - 1], out[k - 1], dt)
-        M, N = radii(lat_m)
+        _, c, h_m, M, N = llf_mid_point(lat[k - 1], h[k - 1], out[k - 1], dt)
         out[k, 1] = 2.0 * (lat[k] - lat[k - 1]) * (M + h_m) / dt - out[k - 1, 1]
-        out[k, 0] = 2.0 * dlon[k - 1] * ((N + h_m) * np.cos(lat_m)) / dt - out[k - 1, 0]
+        out[k, 0] = 2.0 * dlon[k - 1] * ((N + h_m) * c) / dt - out[k - 1, 0]
         out[k, 2] = 2.0 * (h[k] - h[k - 1]) / dt - out[k - 1, 2]
 
 

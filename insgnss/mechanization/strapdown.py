@@ -6,9 +6,10 @@ the interval (body frame, right-forward-up), follows seed 000 sections 2.4-2.6 (
 second order (Savage 2000, *Strapdown Analytics*, sections 7.1-7.3):
 
 1. Earth terms (:func:`llf_earth_terms`): the mid-interval position is predicted from the start
-   state, ``lat_m = lat + v_n dt / (2 (M + h))``, ``h_m = h + v_u dt / 2`` (an O(dt^2) estimate,
-   enough for O(dt^3) local error). There the Earth rate ``w_ie^l`` (eq. 22), the transport-rate
-   matrix ``K`` with ``w_el^l = K v`` (eq. 23), the radii and normal gravity are evaluated. The
+   state (:func:`llf_mid_point`), ``lat_m = lat + v_n dt / (2 (M + h))``, ``h_m = h + v_u dt / 2``
+   (an O(dt^2) estimate, enough for O(dt^3) local error). There the Earth rate ``w_ie^l``
+   (eq. 22), the transport-rate matrix ``K`` with ``w_el^l = K v`` (eq. 23), the radii and
+   normal gravity are evaluated. The
    prediction uses only the start of the interval, so the step keeps no memory: the filter's
    feedback and partial intervals need nothing special, and the inverse stays explicit.
 
@@ -56,7 +57,7 @@ from numba import njit
 from .. import attitude, earth
 from ..align import gyrocompass, level
 from ..attitude import dcm_to_euler, euler_to_dcm
-from ..earth import OMEGA_E, check_latitude, normal_gravity_id, radii
+from ..earth import E2, OMEGA_E, A, check_latitude, normal_gravity_sc, radii
 from ..errors import ConfigError
 from ..imu import compensation_matrix, coning_sculling, increments
 from .core import (  # noqa: F401  (re-exported: the public names of the step live here)
@@ -81,21 +82,35 @@ from .wander import WANDER_COLS, mechanize_wander, wander_state, wander_step, wa
 
 
 # --- the compiled step -----------------------------------------------------------------------------
-@njit(cache=True)
-def mid_position(lat, h, v, dt):
-    """Latitude and height half an interval ahead of ``(lat, h)`` with the start velocity ``v``
-    (ENU): ``lat_m = lat + v_n dt / (2 (M + h))``, ``h_m = h + v_u dt / 2``. An O(dt^2) estimate of
-    the mid-interval position, which is all a second-order step needs."""
-    M, _ = radii(lat)
-    return lat + 0.5 * dt * v[1] / (M + h), h + 0.5 * dt * v[2]
+@njit(cache=True, inline="always")
+def llf_mid_point(lat, h, v, dt):
+    """The interval's middle predicted from its start ``(lat, h)`` and start velocity ``v``
+    (ENU): ``lat_m = lat + d``, ``d = v_n dt / (2 (M + h))``, ``h_m = h + v_u dt / 2``. An O(dt^2)
+    estimate of the mid-interval position, which is all a second-order step needs.
+
+    Returns ``(sin lat_m, cos lat_m, h_m, M_m, N_m)``; ``sin``/``cos`` of ``lat_m`` come from
+    those of ``lat`` by the angle-addition series in ``d`` (|d| < 1e-5 rad per step even at
+    1 s and 250 m/s, so the series is exact to rounding), so one pair of trigonometric calls
+    serves the whole step.
+    """
+    s0, c0 = np.sin(lat), np.cos(lat)
+    w0 = 1.0 - E2 * s0 * s0
+    M0 = A * (1.0 - E2) / (w0 * np.sqrt(w0))
+    d = 0.5 * dt * v[1] / (M0 + h)
+    e = 0.5 * d * d
+    s = s0 * (1.0 - e) + c0 * d
+    c = c0 * (1.0 - e) - s0 * d
+    w = 1.0 - E2 * s * s
+    N = A / np.sqrt(w)
+    return s, c, h + 0.5 * dt * v[2], N * (1.0 - E2) / w, N
 
 
-@njit(cache=True)
-def position_step(lat, lon, h, v_old, v_new, dt, lat_m, Rm, Rn):
+@njit(cache=True, inline="always")
+def position_step(lat, lon, h, v_old, v_new, dt, c_m, Rm, Rn):
     """Trapezoidal position update (seed eqs. 26-28) with the radii ``Rm = M + h``,
-    ``Rn = N + h`` and ``cos(lat)`` taken at the mid-interval point ``lat_m``."""
+    ``Rn = N + h`` and ``cos(lat)`` (``c_m``) taken at the mid-interval point."""
     lat_new = lat + 0.5 * (v_old[1] + v_new[1]) / Rm * dt
-    lon_new = lon + 0.5 * (v_old[0] + v_new[0]) / (Rn * np.cos(lat_m)) * dt
+    lon_new = lon + 0.5 * (v_old[0] + v_new[0]) / (Rn * c_m) * dt
     h_new = h + 0.5 * (v_old[2] + v_new[2]) * dt
     return lat_new, lon_new, h_new
 
@@ -103,34 +118,31 @@ def position_step(lat, lon, h, v_old, v_new, dt, lat_m, Rm, Rn):
 @njit(cache=True)
 def position_update(lat, lon, h, v_old, v_new, dt):
     """The strapdown step's position rule: trapezoidal velocity (seed eqs. 26-28) with the radii
-    at the mid-interval point predicted by :func:`mid_position`. Second order; the inverse
-    (velocity from positions) is explicit, see :func:`insgnss.trajectory_tools.llh_to_vne`."""
-    lat_m, h_m = mid_position(lat, h, v_old, dt)
-    M, N = radii(lat_m)
-    return position_step(lat, lon, h, v_old, v_new, dt, lat_m, M + h_m, N + h_m)
+    at the mid-interval point predicted by :func:`llf_mid_point`. Second order; its inverse
+    (velocity from positions) is :func:`insgnss.trajectory_tools.llh_to_vne`."""
+    _, c, h_m, M, N = llf_mid_point(lat, h, v_old, dt)
+    return position_step(lat, lon, h, v_old, v_new, dt, c, M + h_m, N + h_m)
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def llf_earth_terms(lat, h, vel, dt, gravity_model, wie, K):
-    """Earth quantities of one interval at its predicted middle (:func:`mid_position`).
+    """Earth quantities of one interval at its predicted middle (:func:`llf_mid_point`).
 
     Writes the Earth rate ``w_ie^l`` (eq. 22) into ``wie`` and the transport-rate matrix ``K``
     with ``w_el^l = K v`` (eq. 23: rows ``(0, -1/(M+h), 0)``, ``(1/(N+h), 0, 0)``,
-    ``(tan(lat)/(N+h), 0, 0)``) into ``K``. Returns ``(g, lat_m, M_m + h_m, N_m + h_m)`` with the
-    normal gravity ``g`` at the mid point.
+    ``(tan(lat)/(N+h), 0, 0)``) into ``K``. Returns ``(g, cos lat_m, M_m + h_m, N_m + h_m)`` with
+    the normal gravity ``g`` at the mid point.
     """
-    lat_m, h_m = mid_position(lat, h, vel, dt)
-    M, N = radii(lat_m)
+    s, c, h_m, M, N = llf_mid_point(lat, h, vel, dt)
     Rm, Rn = M + h_m, N + h_m
-    slat, clat = np.sin(lat_m), np.cos(lat_m)
-    wie[0], wie[1], wie[2] = 0.0, OMEGA_E * clat, OMEGA_E * slat
+    wie[0], wie[1], wie[2] = 0.0, OMEGA_E * c, OMEGA_E * s
     for i in range(3):
         for j in range(3):
             K[i, j] = 0.0
     K[0, 1] = -1.0 / Rm
     K[1, 0] = 1.0 / Rn
-    K[2, 0] = slat / clat / Rn
-    return normal_gravity_id(lat_m, h_m, gravity_model), lat_m, Rm, Rn
+    K[2, 0] = s / c / Rn
+    return normal_gravity_sc(s, c, h_m, gravity_model), c, Rm, Rn
 
 
 @njit(cache=True)
@@ -140,15 +152,15 @@ def strapdown_step(pos, vel, C, dth, dv, dt, gravity_model, attitude_update, fix
     ``work`` is a scratch array of shape :data:`STEP_WORK_SHAPE` (no allocation per sample; its
     content on entry does not matter, so the step keeps no memory between calls).
     """
-    wie, zeta, th = work[7, 0], work[7, 1], work[6, 0]
-    K = work[4]
-    g, lat_m, Rm, Rn = llf_earth_terms(pos[0], pos[2], vel, dt, gravity_model, wie, K)
+    E0, E1, E2_, E3, K = work[0], work[1], work[2], work[3], work[4]
+    vecs = work[6]
+    th, zeta, v0, wie = vecs[0], vecs[1], vecs[2], work[7, 0]
+    g, c_m, Rm, Rn = llf_earth_terms(pos[0], pos[2], vel, dt, gravity_model, wie, K)
     body_rotation(dth, attitude_update, th)
-    velocity_update(vel, C, th, dv, dt, wie, K, g, fix_height, work)
-    v0 = work[6, 2]
+    velocity_update(vel, v0, C, th, dv, dt, wie, K, g, fix_height, E0, E1, E2_, E3)
     nav_frame_rotation(wie, K, v0, vel, dt, zeta)
-    attitude_step(C, th, zeta, work)
-    pos[0], pos[1], pos[2] = position_step(pos[0], pos[1], pos[2], v0, vel, dt, lat_m, Rm, Rn)
+    attitude_step(C, th, zeta, E0, E1, E2_)
+    pos[0], pos[1], pos[2] = position_step(pos[0], pos[1], pos[2], v0, vel, dt, c_m, Rm, Rn)
 
 
 @njit(cache=True)
@@ -416,14 +428,15 @@ class INSMechanization:
         """
         self._require_enu("v_and_r_integration")
         wie, K, th = np.empty(3), np.empty((3, 3)), np.empty(3)
-        g, lat_m, Rm, Rn = llf_earth_terms(self.pos[0], self.pos[2], self.vel, float(dt),
-                                           self._gravity_id, wie, K)
+        g, c_m, Rm, Rn = llf_earth_terms(self.pos[0], self.pos[2], self.vel, float(dt),
+                                         self._gravity_id, wie, K)
         body_rotation(np.asarray(dtheta, float), self._attitude_id, th)
-        v0 = self.vel.copy()
-        velocity_update(self.vel, self.C, th, np.asarray(dv, float), float(dt), wie, K, g, False,
-                        self._work)
+        v0 = np.empty(3)
+        w = self._work
+        velocity_update(self.vel, v0, self.C, th, np.asarray(dv, float), float(dt), wie, K, g,
+                        False, w[0], w[1], w[2], w[3])
         self.pos[0], self.pos[1], self.pos[2] = position_step(
-            self.pos[0], self.pos[1], self.pos[2], v0, self.vel, float(dt), lat_m, Rm, Rn)
+            self.pos[0], self.pos[1], self.pos[2], v0, self.vel, float(dt), c_m, Rm, Rn)
         self._interval = (float(dt), wie, K, v0, self.vel.copy())
         return self.vel.copy(), self.pos.copy()
 

@@ -56,8 +56,8 @@ import numpy as np
 import pandas as pd
 from numba import njit
 
-from ..attitude import Rz, rotvec_to_dcm_nb
-from ..earth import E2, OMEGA_E, A, check_latitude, enu_to_ecef_dcm, normal_gravity_id
+from ..attitude import Rz, rotvec_xyz_to_dcm_nb
+from ..earth import E2, OMEGA_E, A, check_latitude, enu_to_ecef_dcm, normal_gravity_sc
 from .core import (
     NAV_COLS,
     STEP_WORK_SHAPE,
@@ -75,10 +75,10 @@ WANDER_COLS = NAV_COLS + ["wander_angle"]
 
 
 # --- compiled pieces ---------------------------------------------------------------------------
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def transport_matrix(z0, z1, z2, h, K):
     """Write ``K`` (3x3) with ``rho^w = K v^w`` for the polar-axis direction ``z^w = (z0, z1, z2)``
-    (unit) at height ``h``; returns ``atan2(z2, hypot(z0, z1))``, the geodetic latitude."""
+    (unit; ``z2 = sin(lat)``) at height ``h``."""
     s2 = z2 * z2
     w = 1.0 - E2 * s2
     N = A / np.sqrt(w)
@@ -93,10 +93,9 @@ def transport_matrix(z0, z1, z2, h, K):
     K[0, 0], K[0, 1], K[0, 2] = f01, -f00, 0.0
     K[1, 0], K[1, 1], K[1, 2] = f11, -f01, 0.0
     K[2, 0], K[2, 1], K[2, 2] = 0.0, 0.0, 0.0
-    return np.arctan2(z2, np.sqrt(z0 * z0 + z1 * z1))
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def wander_earth_terms(z, h, vel, dt, gravity_model, wie, K, zm):
     """Earth terms of one interval at its predicted middle (step 1 of the module docstring).
 
@@ -115,25 +114,25 @@ def wander_earth_terms(z, h, vel, dt, gravity_model, wie, K, zm):
     n = np.sqrt(x * x + y * y + u * u)
     zm[0], zm[1], zm[2] = x / n, y / n, u / n
     h_m = h + a * vel[2]
-    lat_m = transport_matrix(zm[0], zm[1], zm[2], h_m, K)
+    transport_matrix(zm[0], zm[1], zm[2], h_m, K)
     wie[0], wie[1], wie[2] = OMEGA_E * zm[0], OMEGA_E * zm[1], OMEGA_E * zm[2]
-    return normal_gravity_id(lat_m, h_m, gravity_model)
+    # sin(lat) = z_z, cos(lat) = |z_h|
+    return normal_gravity_sc(zm[2], np.sqrt(zm[0] * zm[0] + zm[1] * zm[1]), h_m, gravity_model)
 
 
-@njit(cache=True)
-def wander_position_step(Cne, hv, v0, v1, dt, K, work):
-    """``C_w^e <- C_w^e exp([xi x])`` with ``xi = K (v0 + v1) / 2 dt``; ``hv[0] += v_z dt``."""
-    xi = work[7, 2]
-    for i in range(3):
-        xi[i] = 0.5 * dt * (K[i, 0] * (v0[0] + v1[0]) + K[i, 1] * (v0[1] + v1[1])
-                            + K[i, 2] * (v0[2] + v1[2]))
-    E, tmp = work[0], work[1]
-    rotvec_to_dcm_nb(xi, E)
+@njit(cache=True, inline="always")
+def wander_position_step(Cne, hv, v0, v1, dt, K, E, tmp):
+    """``C_w^e <- C_w^e exp([xi x])`` with ``xi = K (v0 + v1) / 2 dt``; ``hv[0] += v_z dt``
+    (``E``, ``tmp``: 3x3 scratch)."""
+    s0, s1, s2 = 0.5 * dt * (v0[0] + v1[0]), 0.5 * dt * (v0[1] + v1[1]), 0.5 * dt * (v0[2] + v1[2])
+    rotvec_xyz_to_dcm_nb(K[0, 0] * s0 + K[0, 1] * s1 + K[0, 2] * s2,
+                         K[1, 0] * s0 + K[1, 1] * s1 + K[1, 2] * s2,
+                         K[2, 0] * s0 + K[2, 1] * s1 + K[2, 2] * s2, E)
     _matmul3(Cne, E, tmp)
     for i in range(3):
         for j in range(3):
             Cne[i, j] = tmp[i, j]
-    hv[0] += 0.5 * (v0[2] + v1[2]) * dt
+    hv[0] += s2
 
 
 @njit(cache=True)
@@ -143,15 +142,15 @@ def wander_step(Cne, hv, vel, C, dth, dv, dt, gravity_model, attitude_update, fi
 
     ``work`` is a scratch array of shape :data:`~insgnss.mechanization.core.STEP_WORK_SHAPE`.
     """
-    wie, zeta, zm, th = work[7, 0], work[7, 1], work[5, 0], work[6, 0]
-    K = work[4]
+    E0, E1, E2_, E3, K = work[0], work[1], work[2], work[3], work[4]
+    vecs = work[6]
+    th, zeta, v0, wie, zm = vecs[0], vecs[1], vecs[2], work[7, 0], work[5, 0]
     g = wander_earth_terms(Cne[2], hv[0], vel, dt, gravity_model, wie, K, zm)
     body_rotation(dth, attitude_update, th)
-    velocity_update(vel, C, th, dv, dt, wie, K, g, fix_height, work)
-    v0 = work[6, 2]
+    velocity_update(vel, v0, C, th, dv, dt, wie, K, g, fix_height, E0, E1, E2_, E3)
     nav_frame_rotation(wie, K, v0, vel, dt, zeta)
-    attitude_step(C, th, zeta, work)
-    wander_position_step(Cne, hv, v0, vel, dt, K, work)
+    attitude_step(C, th, zeta, E0, E1, E2_)
+    wander_position_step(Cne, hv, v0, vel, dt, K, E0, E1)
 
 
 @njit(cache=True)
@@ -209,7 +208,7 @@ def _integrate_position_wander(t, vel, Cne0, h0, Cne_out, h_out):
     for k in range(1, t.shape[0]):
         dt = t[k] - t[k - 1]
         wander_earth_terms(Cne[2], hv[0], vel[k - 1], dt, 0, wie, K, zm)
-        wander_position_step(Cne, hv, vel[k - 1], vel[k], dt, K, work)
+        wander_position_step(Cne, hv, vel[k - 1], vel[k], dt, K, work[0], work[1])
         Cne_out[k] = Cne
         h_out[k] = hv[0]
 
