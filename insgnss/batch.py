@@ -107,6 +107,11 @@ def run_batch_job(path: str, base: dict | None = None, out_dir: str | None = Non
     job = load_job_dict(merged, p)
     if not report:
         job.settings["outputs"]["report"] = False
+    if write_outputs and out_dir is not None:  # before computing (insgnss.io.outputset)
+        from .io.outputset import MARKER, check_output_location
+        from .pipeline import OUTPUT_NAMES
+
+        check_output_location(out_dir, protect=job.input_paths(), names=(*OUTPUT_NAMES, MARKER))
     res = run_job(job, progress=False)
     s = res.summary
     row = {"job": s["job"] if s["job"] != "job" else p.stem, "file": str(p),
@@ -193,7 +198,7 @@ def run_batch(patterns: list[str] | tuple[str, ...], *, settings: str | Path | d
     else:
         base, base_name = settings, None
     if base is not None:  # validate the shared settings once, here
-        load_job_dict(base, base_name)
+        load_job_dict(base, base_name, complete=False)
     datas = []
     for f in files:  # names only; a broken file is reported by its work unit
         try:

@@ -4,7 +4,9 @@ Sub-commands live in :mod:`insgnss.commands`, one module each, discovered automa
 defines ``NAME`` (the sub-command), ``HELP`` (one line) and ``register(parser)`` that adds its
 arguments and sets ``parser.set_defaults(func=run)`` where ``run(args) -> int``.
 The CLI only parses arguments, calls the pipeline and reports; :class:`InsgnssError` is printed
-without a traceback and the exit status is 2.
+without a traceback and the exit status is 2 (as for running out of memory). Commands that
+write outputs check and lock their output folder before computing (:mod:`insgnss.commands.
+_outputs`).
 """
 
 from __future__ import annotations
@@ -50,6 +52,12 @@ def main(argv: list[str] | None = None) -> int:
     except KeyboardInterrupt:
         print(f"insgnss {args.command}: interrupted", file=sys.stderr)
         return 130
+    except MemoryError:  # a resource limit, not a bug: say so without a traceback
+        print(f"insgnss {args.command}: error: out of memory: the run needs more memory than "
+              "this process may use (a longer log, a shorter filter.epoch_interval or more "
+              "outage windows need more; the smoother stores covariances per epoch); the "
+              "previous outputs are left as they were", file=sys.stderr)
+        return 2
 
 
 if __name__ == "__main__":  # pragma: no cover

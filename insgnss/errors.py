@@ -92,6 +92,14 @@ class NoUsableAidingError(InsgnssError):
     names the step that removed the last of it."""
 
 
+class OutputError(InsgnssError):
+    """An output location cannot be used: not a folder, cannot be created, not writable."""
+
+
+class OutputBusyError(OutputError):
+    """The output folder is locked by another run (``insgnss.io.outputset``)."""
+
+
 class InsgnssWarning(_Located, UserWarning):
     """A problem insgnss repaired or tolerated (bridged gap, dropped duplicate, trimmed epoch).
 

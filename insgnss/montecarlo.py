@@ -567,7 +567,7 @@ def write_tidy(df: pd.DataFrame, path: Path) -> Path:
 def load_source(job: Job | dict | str | Path) -> tuple[dict, Path | None]:
     """Parsed job dict and its file (for the work units: plain data, no open files)."""
     if isinstance(job, Job):
-        data = {**job.simulation, **{k: v for k, v in job.settings.items()}}
+        data = job.to_dict()
         return data, job.path
     if isinstance(job, dict):
         return job, None

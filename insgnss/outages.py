@@ -17,35 +17,75 @@ def _us(x) -> np.ndarray:
     return np.round(np.asarray(x, dtype=float) * 1e6).astype(np.int64)
 
 
+#: most windows :func:`periodic_windows` builds (a schedule beyond this is a unit mistake, and
+#: the list alone would take gigabytes)
+MAX_WINDOWS = 10_000_000
+
+
 def periodic_windows(t_first: float, t_last: float, start: float, length: float, gap: float,
                      stop_before_end: float = 0.0) -> list[tuple[float, float]]:
-    """Periodic outage windows ``[(S_k, E_k), ...]`` (see module docstring)."""
-    if length <= 0 or gap < 0:
-        raise ValueError(f"outage length must be > 0 and gap >= 0; got {length}, {gap}")
+    """Periodic outage windows ``[(S_k, E_k), ...]`` (see module docstring).
+
+    Raises ValueError unless ``length`` and ``gap`` are finite and at least one microsecond
+    (the resolution of the arithmetic: a shorter period would never advance) and the schedule
+    has at most :data:`MAX_WINDOWS` windows.
+    """
+    values = (t_first, t_last, start, length, gap, stop_before_end)
+    if not all(np.isfinite(float(v)) for v in values):
+        raise ValueError(f"outage schedule values must be finite; got {values}")
     t0, t1 = int(_us(t_first)), int(_us(t_last))
-    s, L, period = int(_us(start)), int(_us(length)), int(_us(length + gap))
+    s, L, G = int(_us(start)), int(_us(length)), int(_us(gap))
+    if L < 1 or G < 1:
+        raise ValueError(f"outage length and gap must be at least 1 microsecond; got "
+                         f"{length!r} s and {gap!r} s")
+    period = L + G
     stop = t1 - int(_us(stop_before_end))
-    out = []
-    S = t0 + s
-    while S < stop:
-        out.append((S / 1e6, min(S + L, stop) / 1e6))
-        S += period
-    return out
+    first = t0 + s
+    n = max(0, -(-(stop - first) // period))  # starts S_k = first + k period < stop
+    if n > MAX_WINDOWS:
+        raise ValueError(f"{n} outage windows (length {length!r} s, gap {gap!r} s over "
+                         f"{(t1 - t0) / 1e6:g} s); at most {MAX_WINDOWS}")
+    S = first + period * np.arange(n, dtype=np.int64)
+    E = np.minimum(S + L, stop)
+    return list(zip((S / 1e6).tolist(), (E / 1e6).tolist(), strict=True))
+
+
+def _disjoint(windows) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
+    """Starts, ends [us] and list order of the windows sorted by start, if none overlap."""
+    a = _us([w[0] for w in windows]).reshape(-1)
+    b = _us([w[1] for w in windows]).reshape(-1)
+    order = np.argsort(a, kind="stable")
+    a, b = a[order], b[order]
+    if np.any(a[1:] < b[:-1]):
+        return None
+    return a, b, order
+
+
+def window_index(t, windows) -> np.ndarray:
+    """Index of the window containing each time, -1 outside all windows (overlapping windows:
+    the last one listed wins)."""
+    t_us = _us(t)
+    idx = np.full(t_us.shape, -1, dtype=int)
+    if not len(windows):
+        return idx
+    d = _disjoint(windows)
+    if d is not None:  # O((N + W) log W) for any number of windows
+        a, b, order = d
+        k = np.searchsorted(a, t_us, side="right") - 1
+        inside = (k >= 0) & (t_us < b[np.maximum(k, 0)])
+        idx[inside] = order[k[inside]]
+        return idx
+    for k, (a, b) in enumerate(windows):
+        idx[(t_us >= int(_us(a))) & (t_us < int(_us(b)))] = k
+    return idx
 
 
 def in_windows(t, windows) -> np.ndarray:
     """Boolean mask: ``t`` inside any half-open window."""
-    t_us = _us(t)
-    mask = np.zeros(t_us.shape, bool)
-    for a, b in windows:
-        mask |= (t_us >= int(_us(a))) & (t_us < int(_us(b)))
-    return mask
-
-
-def window_index(t, windows) -> np.ndarray:
-    """Index of the window containing each time, -1 outside all windows."""
-    t_us = _us(t)
-    idx = np.full(t_us.shape, -1, dtype=int)
-    for k, (a, b) in enumerate(windows):
-        idx[(t_us >= int(_us(a))) & (t_us < int(_us(b)))] = k
-    return idx
+    if len(windows) and _disjoint(windows) is None:
+        t_us = _us(t)
+        mask = np.zeros(t_us.shape, bool)
+        for a, b in windows:
+            mask |= (t_us >= int(_us(a))) & (t_us < int(_us(b)))
+        return mask
+    return window_index(t, windows) >= 0

@@ -39,6 +39,7 @@ from .earth import geodetic_to_enu
 from .errors import InvalidValueError
 from .imu import ImuErrorModel
 from .outages import in_windows
+from .validate import check_time_overlap
 
 
 def estimate_time_offset(imu: pd.DataFrame, gnss: pd.DataFrame, windows=(), *,
@@ -47,8 +48,11 @@ def estimate_time_offset(imu: pd.DataFrame, gnss: pd.DataFrame, windows=(), *,
     """Shift to add to the IMU time stamps so that the gyro yaw rate matches the GNSS course
     rate (see the module docstring). Returns ``(dt, info)``.
 
-    Raises :class:`InvalidValueError` when there is too little turning motion to tell.
+    Raises :class:`~insgnss.errors.TimeOrderError` when IMU and GNSS do not overlap in time
+    (both spans printed), :class:`InvalidValueError` when too few GNSS epochs are moving or
+    there is too little turning motion to tell.
     """
+    check_time_overlap(imu, gnss)
     tg = gnss.index.to_numpy(float)
     e, n, _ = geodetic_to_enu(gnss["lat"].to_numpy(), gnss["lon"].to_numpy(),
                               gnss["height"].to_numpy(), float(gnss["lat"].iloc[0]),
@@ -63,10 +67,19 @@ def estimate_time_offset(imu: pd.DataFrame, gnss: pd.DataFrame, windows=(), *,
     ok = (speed > min_speed) & gap_ok & ~in_windows(tg, list(windows))
     t, w, _ = imu_rates(imu)
     ok &= (tg - span > t[0] + search) & (tg + span < t[-1] - search)
-    if ok.sum() < 50 or np.std(course_rate[ok]) < np.radians(1.0):
-        raise InvalidValueError("too little turning motion to estimate the IMU-GNSS time offset",
-                                expected=">= 50 moving epochs with turns",
-                                found=f"{int(ok.sum())} epochs")
+    src = gnss.attrs.get("source")
+    if ok.sum() < 50:
+        raise InvalidValueError(
+            "too few moving GNSS epochs to estimate the IMU-GNSS time offset", file=src,
+            expected=f">= 50 epochs faster than {min_speed:g} m/s inside the IMU span (less "
+                     f"{search:g} s at each end), outside outages and gaps",
+            found=f"{int(ok.sum())} epochs")
+    if np.std(course_rate[ok]) < np.radians(1.0):
+        raise InvalidValueError(
+            "too little turning motion to estimate the IMU-GNSS time offset", file=src,
+            expected="a course-rate spread >= 1 deg/s over the moving epochs",
+            found=f"{np.degrees(np.std(course_rate[ok])):.3g} deg/s over {int(ok.sum())} "
+                  "epochs")
     yaw = -w[:, 2]
     cs = np.concatenate([[0.0], np.cumsum(yaw)])
 

@@ -508,6 +508,58 @@ def source_rows(df: pd.DataFrame) -> np.ndarray | None:
     return np.asarray(rows)
 
 
+def check_time_overlap(imu: pd.DataFrame, other: pd.DataFrame, what: str = "GNSS") -> None:
+    """IMU and another input must overlap in time.
+
+    Raises TimeOrderError naming both files and printing both spans when they do not (a file
+    a day late, different time bases, a wrong time offset), so that no later step reports a
+    symptom (no turning motion, no epoch to initialize from) instead of the cause.
+    """
+    ti, to = np.asarray(imu.index, float), np.asarray(other.index, float)
+    if not ti.size or not to.size:
+        return
+    a0, a1, b0, b1 = float(ti[0]), float(ti[-1]), float(to[0]), float(to[-1])
+    if b1 >= a0 and b0 <= a1:
+        return
+    src_i = imu.attrs.get("source", "IMU table")
+    src_o = other.attrs.get("source", f"{what} table")
+    apart = b0 - a1 if b0 > a1 else a0 - b1
+    raise TimeOrderError(
+        f"no overlap in time between the IMU and the {what} data: IMU from {a0!r} to {a1!r} s "
+        f"({src_i}), {what} from {b0!r} to {b1!r} s ({src_o}), {apart:.6g} s apart "
+        "(different time bases, a wrong date or a missing time offset?)", file=src_o,
+        column=other.attrs.get("time_column", "time"),
+        expected=f"{what} epochs inside the IMU span {a0!r} to {a1!r} s",
+        found=f"{b0!r} to {b1!r} s")
+
+
+def check_time_bases(tables: dict[str, pd.DataFrame | None], declared: str = "unspecified", *,
+                     file=None) -> None:
+    """Every input's time base (``attrs["time_base"]``, set by its reader) must be the job's
+    ``declared`` one, and two inputs must not be in different bases; ``"unspecified"`` (a
+    native CSV, or a job that declares none) matches anything. Raises ConfigError naming
+    ``job.time_base``, the inputs and their bases."""
+    seen: list[tuple[str, str, str]] = []
+    for name, df in tables.items():
+        if df is None:
+            continue
+        base = df.attrs.get("time_base") or "unspecified"
+        if base == "unspecified":
+            continue
+        src = str(df.attrs.get("source", name))
+        if declared != "unspecified" and base != declared:
+            raise ConfigError(f"the {name} time stamps are in another time base than the job "
+                              "declares", file=file, column="job.time_base",
+                              expected=repr(declared), found=f"{base!r} ({src})")
+        for other, b, s in seen:
+            if b != base:
+                raise ConfigError(f"inputs in different time bases: the {other} ({s}) in {b!r}, "
+                                  f"the {name} ({src}) in {base!r}", file=file,
+                                  column="job.time_base", expected="one time base",
+                                  found=f"{b!r} and {base!r}")
+        seen.append((name, base, src))
+
+
 def check_gnss_in_imu_span(gnss: pd.DataFrame, imu: pd.DataFrame, *, policy: str = "trim",
                            tolerance: float = 0.0) -> pd.DataFrame:
     """GNSS epochs outside the IMU time span: trimmed with a warning, or an error.
@@ -519,6 +571,7 @@ def check_gnss_in_imu_span(gnss: pd.DataFrame, imu: pd.DataFrame, *, policy: str
     tg = np.asarray(gnss.index, float)
     ti = np.asarray(imu.index, float)
     require_rows(ti.size, 1, imu.attrs.get("source"), what="IMU samples")
+    check_time_overlap(imu, gnss)
     rows = source_rows(gnss)
     if rows is None:
         rows = np.arange(tg.size) + 1
@@ -620,27 +673,37 @@ def check_imu_units(gyro: np.ndarray, accel: np.ndarray, line_no: np.ndarray, fi
 # --------------------------------------------------------------------------------------------
 
 
-def ensure_not_input(path: str | os.PathLike, inputs: Iterable[str | os.PathLike | None]) -> Path:
-    """Refuse to write ``path`` if it is one of ``inputs`` (same resolved path or same file).
-
-    Returns ``Path(path)``. Raises ConfigError naming the clashing input.
-    """
+def input_clash(path: str | os.PathLike, inputs: Iterable[str | os.PathLike | None]
+                ) -> Path | None:
+    """The input that ``path`` is, if any: the same resolved path (symlinks and ``..``
+    followed) or the same file under another name (hard link: same device and inode)."""
     p = Path(path)
     rp = p.resolve()
     for q in inputs:
         if q is None:
             continue
         q = Path(q)
-        same = rp == q.resolve()
-        if not same and p.exists() and q.exists():
-            try:
-                same = os.path.samefile(p, q)
-            except OSError:
-                same = False
-        if same:
-            raise ConfigError("refusing to overwrite an input file", file=p,
-                              expected="an output path that is not an input",
-                              found=f"the input {str(q)!r}")
+        if rp == q.resolve():
+            return q
+        try:
+            if os.path.samefile(p, q):
+                return q
+        except OSError:  # one of them does not exist
+            continue
+    return None
+
+
+def ensure_not_input(path: str | os.PathLike, inputs: Iterable[str | os.PathLike | None]) -> Path:
+    """Refuse to write ``path`` if it is one of ``inputs`` (:func:`input_clash`).
+
+    Returns ``Path(path)``. Raises ConfigError naming the clashing input.
+    """
+    p = Path(path)
+    q = input_clash(p, inputs)
+    if q is not None:
+        raise ConfigError("refusing to overwrite an input file", file=p,
+                          expected="an output path that is not an input",
+                          found=f"the input {str(q)!r}")
     return p
 
 

@@ -98,3 +98,25 @@ def test_docs_jobs_md_examples_are_valid_jobs():
     assert len(blocks) >= 5
     for b in blocks:
         load_job_dict(tomllib.loads(b), "docs/jobs.md")
+
+
+def test_docs_jobs_md_schema_section_is_generated_from_the_schema():
+    """docs/jobs.md "Schema" ends with exactly schema_markdown() (regenerate it with
+    ``python -c "from insgnss.config import schema_markdown; print(schema_markdown())"``)."""
+    from pathlib import Path
+
+    doc = (Path(__file__).resolve().parents[1] / "docs" / "jobs.md").read_text()
+    assert doc.endswith(schema_markdown())
+
+
+def test_docs_jobs_md_states_the_robustness_rules():
+    from pathlib import Path
+
+    doc = (Path(__file__).resolve().parents[1] / "docs" / "jobs.md").read_text()
+    section = doc[doc.index("## Robustness and bad input"):doc.index("## Examples")]
+    for rule in ("finite", "a key the run would not read is an error", "at least one IMU interval",
+                 "check_output_location", "in use by pid", "--wait", "stale",
+                 "never deletes, moves or changes one of its inputs", "hard links",
+                 "overlap in time",
+                 "job.time_base", "Removed keys"):
+        assert rule in section, rule

@@ -18,7 +18,7 @@ import pytest
 from robustness_helpers import small_job_text
 
 from insgnss.config import load_job
-from insgnss.io.outputset import MARKER, STAGING_PREFIX, OutputSet
+from insgnss.io.outputset import LOCK_NAME, MARKER, STAGING_PREFIX, OutputSet
 from insgnss.pipeline import run_job, write_outputs
 
 CHILD = r"""
@@ -49,7 +49,8 @@ sys.exit(main(sys.argv[2:]))
 
 
 def _snapshot(folder: Path) -> dict[str, bytes]:
-    return {p.name: p.read_bytes() for p in folder.iterdir() if p.is_file()}
+    """The files of an output folder (without the lock file of a run, see test_output_safety)."""
+    return {p.name: p.read_bytes() for p in folder.iterdir() if p.is_file() and p.name != LOCK_NAME}
 
 
 def _staged(folder: Path) -> list[Path]:
@@ -110,15 +111,19 @@ def test_interrupt_while_writing_keeps_the_previous_outputs(previous, tmp_path, 
     if sig == signal.SIGINT:
         assert proc.returncode == 130 and "interrupted" in err and "Traceback" not in err
         assert not list(out.glob(STAGING_PREFIX + "*"))  # Ctrl-C cleans up after itself
+        assert not (out / LOCK_NAME).exists()
     else:
         assert proc.returncode == -signal.SIGKILL
         assert _staged(out)  # the half-written file stays hidden in the staging folder
+        assert (out / LOCK_NAME).exists()  # and the lock, now stale
         # the next run removes the leftovers and replaces the set completely
         r = subprocess.run([sys.executable, "-m", "insgnss.cli", "process", str(job_path), "-o",
                             str(out), "--no-progress", "--seed", "8"], capture_output=True,
                            text=True, timeout=300)
         assert r.returncode == 0, r.stderr
+        assert "stale lock" in r.stderr
         assert not list(out.glob(STAGING_PREFIX + "*")) and not (out / MARKER).exists()
+        assert not (out / LOCK_NAME).exists()
         new = _snapshot(out)
         assert set(new) == set(snap) and new["forward.csv"] != snap["forward.csv"]
         assert json.loads(new["summary.json"])["seed"] == 8

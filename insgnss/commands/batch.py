@@ -19,6 +19,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from ._outputs import output_folder
 from .montecarlo import add_backend_arguments, make_backend
 
 NAME = "batch"
@@ -41,13 +42,15 @@ def register(p: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     import pandas as pd
 
-    from ..batch import run_batch
+    from ..batch import expand_jobs, run_batch
 
-    with make_backend(args) as ex:
-        res = run_batch(args.jobs, settings=args.settings, out_dir=args.output, executor=ex,
-                        write_outputs=not args.summary_only, report=args.report,
-                        progress=not args.no_progress)
-    paths = res.write(args.output)
+    files, _ = expand_jobs(list(args.jobs))
+    with output_folder(args, args.output, protect=[args.settings, *files]):
+        with make_backend(args) as ex:
+            res = run_batch(args.jobs, settings=args.settings, out_dir=args.output,
+                            executor=ex, write_outputs=not args.summary_only,
+                            report=args.report, progress=not args.no_progress)
+        paths = res.write(args.output)
     s = res.summary
     for pat in s["unmatched_patterns"]:
         print(f"warning: no file matched {pat!r}")

@@ -24,6 +24,8 @@ import json
 import tomllib
 from pathlib import Path
 
+from ._outputs import add_wait_argument, output_folder
+
 NAME = "compare"
 HELP = ("drift comparison: free inertial, ZUPT, ZUPT+ZARU, ZUPT+CUPT, GNSS, the job's own "
         "aided solutions and RISS")
@@ -48,6 +50,7 @@ def register(p: argparse.ArgumentParser) -> None:
     p.add_argument("--foot-config", type=Path, default=None,
                    help="TOML with a [foot] table (foot-mounted folder jobs)")
     p.add_argument("--no-figures", action="store_true")
+    add_wait_argument(p)
     p.set_defaults(func=run)
 
 
@@ -87,16 +90,14 @@ def _foot(args):
     return res, f"foot-mounted: {d.name}"
 
 
-def _vehicle(args):
+def _vehicle(args, job):
     import numpy as np
 
     from ..compare import compare_runs, control_points_at_stops
-    from ..config import load_job
     from ..detect import DetectorConfig, detect_stillness
     from ..outages import in_windows
     from ..pipeline import filter_config, initialize, load_inputs, outage_windows, run_job
 
-    job = load_job(args.job)
     inputs = load_inputs(job, args.seed)
     # the job's own processing (all its aiding, outages and preprocessing; this also applies
     # the preprocessing, e.g. an estimated IMU time offset, to the inputs the other runs use)
@@ -165,14 +166,31 @@ def _vehicle(args):
 
 
 def run(args: argparse.Namespace) -> int:
-    from ..compare import format_table, plot_drift, plot_errors
-    from ..io.native import atomic_write_text
-
     foot = args.job.is_dir()
-    res, title = _foot(args) if foot else _vehicle(args)
+    if foot:
+        job, protect = None, [args.job / "imu.csv", args.job / "truth.csv", args.foot_config]
+    else:
+        from ..config import load_job
+
+        job = load_job(args.job)
+        protect = job.input_paths()
+    with output_folder(args, args.output, protect=protect, names=OUTPUT_NAMES):
+        return _run(args, job)
+
+
+#: the files insgnss compare writes
+OUTPUT_NAMES = ("compare_table.csv", "compare_summary.json", "drift_loglog.png",
+                "errors_vs_time.png")
+
+
+def _run(args, job) -> int:
+    from ..compare import format_table, plot_drift, plot_errors
+    from ..io.native import atomic_write, atomic_write_text
+
+    res, title = _foot(args) if job is None else _vehicle(args, job)
     out = args.output
-    out.mkdir(parents=True, exist_ok=True)
-    res.table.to_csv(out / "compare_table.csv", float_format="%.6g")
+    atomic_write(out / "compare_table.csv",
+                 lambda p: res.table.to_csv(p, float_format="%.6g"))
     summary = {"title": title, "runs": res.runs, "solution": res.settings.solution,
                "fit_window_s": list(res.settings.fit_window),
                "table": json.loads(res.table.to_json(orient="index")),

@@ -11,6 +11,8 @@ import argparse
 from importlib import resources
 from pathlib import Path
 
+from ._outputs import add_wait_argument, output_folder
+
 NAME = "demo"
 HELP = "simulate a car drive and process it end to end (no data needed)"
 
@@ -24,17 +26,19 @@ def register(p: argparse.ArgumentParser) -> None:
                    help="output folder (default: out/demo)")
     p.add_argument("--seed", type=int, help="simulation seed")
     p.add_argument("--no-progress", action="store_true")
+    add_wait_argument(p)
     p.set_defaults(func=run)
 
 
 def run(args: argparse.Namespace) -> int:
     from ..config import load_job
     from ..pipeline import run_job, write_outputs
-    from .process import print_summary
+    from .process import output_names, print_summary
 
     job = load_job(demo_job_path())
-    res = run_job(job, progress=False if args.no_progress else None, seed=args.seed)
-    paths = write_outputs(res, args.output)
+    with output_folder(args, args.output, protect=job.input_paths(), names=output_names()):
+        res = run_job(job, progress=False if args.no_progress else None, seed=args.seed)
+        paths = write_outputs(res, args.output)
     print_summary(res)
     print(f"wrote {len(paths)} files to {args.output}; open {args.output / 'report.html'}")
     return 0 if res.filter.complete else 3

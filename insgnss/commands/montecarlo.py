@@ -21,6 +21,8 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from ._outputs import add_wait_argument, output_folder
+
 NAME = "montecarlo"
 HELP = "Monte Carlo study of a scenario job (local processes or a Dask cluster)"
 
@@ -35,6 +37,7 @@ def add_backend_arguments(p: argparse.ArgumentParser) -> None:
     g.add_argument("--local-cluster", type=int, metavar="K",
                    help="start a Dask LocalCluster of K single-threaded worker processes")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    add_wait_argument(p)
 
 
 def make_backend(args: argparse.Namespace):
@@ -64,10 +67,11 @@ def register(p: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     from ..montecarlo import run_montecarlo
 
-    with make_backend(args) as ex:
-        res = run_montecarlo(args.scenario, runs=args.runs, seed=args.seed, executor=ex,
-                             progress=not args.no_progress)
-    paths = res.write(args.output, figures=not args.no_figures)
+    with output_folder(args, args.output, protect=[args.scenario]):
+        with make_backend(args) as ex:
+            res = run_montecarlo(args.scenario, runs=args.runs, seed=args.seed, executor=ex,
+                                 progress=not args.no_progress)
+        paths = res.write(args.output, figures=not args.no_figures)
     print_report(res)
     print(f"wrote {len(paths)} files to {args.output}")
     s = res.summary

@@ -21,6 +21,8 @@ import argparse
 import sys
 from pathlib import Path
 
+from ._outputs import add_wait_argument, output_folder
+
 NAME = "process"
 HELP = "run a job file end to end (filter, smoother, evaluation, report)"
 #: exit status of a run whose filter stopped early (partial outputs written, marked INCOMPLETE)
@@ -33,6 +35,7 @@ def register(p: argparse.ArgumentParser) -> None:
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.add_argument("--no-report", action="store_true", help="do not write report.html")
     p.add_argument("--seed", type=int, help="simulation seed (jobs that simulate a scenario)")
+    add_wait_argument(p)
     p.set_defaults(func=run)
 
 
@@ -43,10 +46,11 @@ def run(args: argparse.Namespace) -> int:
     job = load_job(args.job)
     if args.no_report:
         job.settings["outputs"]["report"] = False
-    res = run_job(job, progress=False if args.no_progress else None, seed=args.seed)
-    paths = write_outputs(res, args.output)
-    print_summary(res)
     out = args.output or job.output_dir
+    with output_folder(args, out, protect=job.input_paths(), names=output_names()):
+        res = run_job(job, progress=False if args.no_progress else None, seed=args.seed)
+        paths = write_outputs(res, out)
+    print_summary(res)
     print(f"wrote {len(paths)} files to {out}")
     if not res.summary["complete"]:
         print(f"insgnss process: INCOMPLETE: {incomplete_reason(res.summary).splitlines()[0]}\n"
@@ -56,6 +60,14 @@ def run(args: argparse.Namespace) -> int:
             raise res.failure  # exit status 2 (cli.main)
         return EXIT_INCOMPLETE
     return 0
+
+
+def output_names() -> tuple[str, ...]:
+    """Every file name a job run may write or remove in its output folder."""
+    from ..io.outputset import MARKER
+    from ..pipeline import OUTPUT_NAMES
+
+    return (*OUTPUT_NAMES, MARKER)
 
 
 def print_summary(res) -> None:

@@ -15,6 +15,8 @@ from __future__ import annotations
 import argparse
 import time
 
+from ._outputs import add_wait_argument, output_folder
+
 NAME = "simulate"
 HELP = "simulate a scenario TOML file (truth, IMU, GNSS, odometer, magnetometer)"
 
@@ -27,17 +29,19 @@ def register(parser: argparse.ArgumentParser) -> None:
                         help="random seed (overrides [scenario] seed)")
     parser.add_argument("--duration", type=float, default=None,
                         help="duration [s] (overrides [scenario] duration; truncates or extends)")
+    add_wait_argument(parser)
     parser.set_defaults(func=run)
 
 
 def run(args: argparse.Namespace) -> int:
     from ..simulate.scenario import simulate_scenario
 
-    t0 = time.perf_counter()
-    result = simulate_scenario(args.scenario, seed=args.seed, duration=args.duration)
-    t1 = time.perf_counter()
-    paths = result.write(args.output)
-    t2 = time.perf_counter()
+    with output_folder(args, args.output, protect=[args.scenario]):
+        t0 = time.perf_counter()
+        result = simulate_scenario(args.scenario, seed=args.seed, duration=args.duration)
+        t1 = time.perf_counter()
+        paths = result.write(args.output)
+        t2 = time.perf_counter()
     meta = result.metadata
     tm = meta["time"]
     print(f"scenario {meta['scenario']['name']}: seed {meta['seed']}, "

@@ -162,9 +162,12 @@ def initialize(job: Job, inputs: Inputs, model: ImuErrorModel, windows=None) -> 
     t_last = float(imu.index[-1])
     method = ini["method"]
     given = [ini[k] for k in ("roll_deg", "pitch_deg", "heading_deg")]
-    if gnss is None and inputs.truth is None:
-        raise ConfigError("initialization needs GNSS (or a simulated truth) for the position",
-                          file=job.path, column="inputs.gnss.path")
+    fixed = None if ini["lat_deg"] is None else np.array(  # given start (jobs without GNSS)
+        [np.radians(ini["lat_deg"]), np.radians(ini["lon_deg"] or 0.0), ini["height"] or 0.0])
+    if gnss is None and inputs.truth is None and fixed is None:
+        raise ConfigError("initialization needs GNSS, a simulated truth or initialization."
+                          "lat_deg/lon_deg/height for the position", file=job.path,
+                          column="inputs.gnss.path")
     if gnss is not None and not len(gnss):
         if inputs.truth is None:
             raise AlignmentError(f"initialization needs a GNSS position, but every GNSS epoch "
@@ -175,6 +178,8 @@ def initialize(job: Job, inputs: Inputs, model: ImuErrorModel, windows=None) -> 
     def position_at(t, C):
         if gnss is not None:
             return _antenna_to_imu(_gnss_at(gnss, t, windows), C, inputs.lever_arm)
+        if inputs.truth is None:
+            return fixed
         r = inputs.truth.iloc[inputs.truth.index.get_indexer([t], method="nearest")[0]]
         return np.array([r["lat"], r["lon"], r["height"]])
 
@@ -230,7 +235,7 @@ def initialize(job: Job, inputs: Inputs, model: ImuErrorModel, windows=None) -> 
     win = imu.loc[: t0 + ini["static_duration"]]
     heading = None if given[2] is None else np.radians(given[2])
     lat_guess = float(gnss["lat"].iloc[0]) if gnss is not None and len(gnss) else \
-        float(inputs.truth["lat"].iloc[0])
+        float(inputs.truth["lat"].iloc[0]) if inputs.truth is not None else float(fixed[0])
     src = "given" if heading is not None else ("gyrocompass" if can_gyrocompass(model, 0.0 if
                                                gnss is None else lat_guess)
                                                else "gnss_course")

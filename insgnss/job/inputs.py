@@ -16,6 +16,7 @@ from ..config import Job
 from ..errors import ConfigError
 from ..imu import ImuErrorModel, grade
 from ..policies import gap_policy
+from ..validate import check_time_bases
 
 
 @dataclass
@@ -150,10 +151,7 @@ def read_reference(job: Job) -> pd.DataFrame | None:
 
 def load_inputs(job: Job, seed: int | None = None) -> Inputs:
     """Read (or simulate, for a job that carries a scenario) all inputs of a job."""
-    la = np.asarray(job["inputs"]["gnss"]["lever_arm"], float)
-    if la.shape != (3,):
-        raise ConfigError("lever arm must have 3 elements", file=job.path,
-                          column="inputs.gnss.lever_arm", found=list(la))
+    la = np.asarray(job["inputs"]["gnss"]["lever_arm"], float)  # 3 finite numbers (config)
     if job.simulation and job["inputs"]["imu"]["path"] is None:
         from ..simulate.scenario import simulate_scenario
 
@@ -170,18 +168,24 @@ def load_inputs(job: Job, seed: int | None = None) -> Inputs:
     imu = read_imu(job)
     gnss = read_gnss(job)
     odo = None
-    if job["inputs"]["odometer"]["path"] is not None:
+    o = job["inputs"]["odometer"]
+    if o["path"] is not None:
         from ..io.odometer import read_odometer
+        from ..preprocess import shift_time
 
-        odo = read_odometer(job.resolve(job["inputs"]["odometer"]["path"]),
-                            kind=job["inputs"]["odometer"]["kind"])
+        odo = read_odometer(job.resolve(o["path"]), kind=o["kind"], format=o["format"],
+                            unit=o["unit"])
+        odo = shift_time(odo, o["time_offset"]) if o["time_offset"] else odo
     cp = None
     if job["inputs"]["control_points"]["path"] is not None:
         from ..io.native import read_table
 
         cp = read_table(job.resolve(job["inputs"]["control_points"]["path"]),
                         required=["lat", "lon", "height"])
-    return Inputs(imu=imu, gnss=gnss, odometer=odo, reference=read_reference(job),
+    ref = read_reference(job)
+    check_time_bases({"IMU": imu, "GNSS": gnss, "odometer": odo, "reference": ref,
+                      "control points": cp}, job["job"]["time_base"], file=job.path)
+    return Inputs(imu=imu, gnss=gnss, odometer=odo, reference=ref,
                   reference_point=job["inputs"]["reference"]["point"], control_points=cp,
                   lever_arm=la, imu_model=imu_model(job, None))
 

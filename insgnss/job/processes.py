@@ -49,8 +49,10 @@ def filter_config(job: Job, model: ImuErrorModel, init: Initialization) -> Filte
         imu_model=model, bias_model=f["bias_model"], scale_factors=f["scale_factors"],
         propagation_interval=f["propagation_interval"], epoch_interval=f["epoch_interval"],
         discretization=f["discretization"], gate_probability=f["gate_probability"] or None,
-        smoother=f["smoother"], initial_pos_std=init.pos_std, initial_vel_std=init.vel_std,
-        initial_att_std=init.att_std, coning=f["coning"],
+        smoother=f["smoother"], initial_pos_std=init.pos_std, coning=f["coning"],
+        initial_vel_std=job["initialization"]["velocity_std"] or init.vel_std,
+        initial_att_std=tuple(np.radians(job["initialization"]["attitude_std_deg"]))
+        if job["initialization"]["attitude_std_deg"] else init.att_std,
         levelling_correlation=init.levelled,
         gate_recovery=f["gate_recovery"] or None, nis_window=f["nis_window"] or None,
         nis_bound=f["nis_bound"],

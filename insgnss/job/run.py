@@ -8,7 +8,7 @@ from __future__ import annotations
 import time
 from pathlib import Path
 
-from ..config import Job
+from ..config import Job, check_job_against_data
 from ..policies import check_imu_table, gap_policy, shift_report
 from ..preprocess import estimate_time_offset, shift_time
 from .context import RunContext
@@ -31,6 +31,8 @@ def prepare(job: Job, *, progress: bool | None = None, seed: int | None = None,
     # duplicates, gaps and segments of the table actually processed (policies.py)
     inputs.imu, imu_report = check_imu_table(inputs.imu, gap_policy(job),
                                              job["inputs"]["imu"]["duplicates"])
+    check_job_against_data(job, imu_report["nominal_dt"],  # intervals, start time (config.py)
+                           (float(inputs.imu.index[0]), float(inputs.imu.index[-1])))
     model = inputs.imu_model or imu_model(job, None)
     windows = outage_windows(job, inputs.gnss)
     preprocessing = {}

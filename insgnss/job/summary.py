@@ -66,7 +66,8 @@ def filter_summary(out: JobResult, counts: dict, notes: list[str], model_name: s
     are the measurement counts, ``notes`` the aiding warnings."""
     job, res = out.job, out.filter
     return {
-        "job": job_name(job), "source": out.inputs.source, "seed": out.inputs.seed,
+        "job": job_name(job), "description": job["job"]["description"],
+        "source": out.inputs.source, "seed": out.inputs.seed,
         "process_model": job["filter"]["process_model"],
         **status(out),
         "imu_samples": int(n_imu), "initialization": initialization_summary(out.init),

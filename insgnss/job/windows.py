@@ -31,8 +31,11 @@ def outage_windows(job: Job, gnss: pd.DataFrame | None) -> list[tuple[float, flo
         if gnss is None:
             raise ConfigError("periodic outages need GNSS data", file=job.path,
                               column="outages.periodic")
-        wins += periodic_windows(t_first, t_last, p["start"], p["length"], p["gap"],
-                                 p["stop_before_end"])
+        try:
+            wins += periodic_windows(t_first, t_last, p["start"], p["length"], p["gap"],
+                                     p["stop_before_end"])
+        except ValueError as exc:  # e.g. more windows than the schedule allows
+            raise ConfigError(str(exc), file=job.path, column="outages.periodic") from None
     return sorted(wins)
 
 

@@ -1,0 +1,58 @@
+"""Messages that name the actual cause (issue 12, item 7)."""
+
+from __future__ import annotations
+
+import warnings
+
+import pytest
+from job_helpers import recorded_job_text, simulate_recording
+
+from insgnss.cli import main
+from insgnss.errors import InsgnssError, TimeOrderError
+from insgnss.io.tracks import read_trajectory_csv
+from insgnss.preprocess import estimate_time_offset
+
+
+@pytest.fixture(scope="module")
+def recording(tmp_path_factory):
+    return simulate_recording(tmp_path_factory.mktemp("rec") / "data")
+
+
+def test_gnss_a_day_late_with_time_offset_estimation_names_the_missing_overlap(
+        recording, tmp_path, capsys):
+    """Said "too little turning motion"; the cause is that IMU and GNSS do not overlap."""
+    job = tmp_path / "job.toml"
+    text = recorded_job_text(recording).replace(
+        'path = "' + str(recording) + '/gnss.csv"',
+        'path = "' + str(recording) + '/gnss.csv"\ntime_offset = 86400.0')
+    text = text.replace("[inputs.imu]\n", "[inputs.imu]\nestimate_time_offset = true\n")
+    job.write_text(text)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        assert main(["process", str(job), "-o", str(tmp_path / "out"), "--no-progress"]) == 2
+    err = capsys.readouterr().err
+    assert "turning" not in err and "Traceback" not in err
+    assert "no overlap in time" in err
+    assert "imu.csv" in err and "gnss.csv" in err
+    assert "86400" in err  # the GNSS span, from 86400 s
+    assert "IMU from 0" in err
+
+
+def test_no_overlap_is_the_same_message_without_estimation(recording):
+    from insgnss.validate import check_gnss_in_imu_span
+
+    imu = read_trajectory_csv(recording / "imu.csv", required=())
+    gnss = read_trajectory_csv(recording / "gnss.csv")
+    late = gnss.set_axis(gnss.index + 86400.0, axis=0)
+    late.attrs = dict(gnss.attrs)
+    with pytest.raises(TimeOrderError, match="no overlap in time") as exc:
+        check_gnss_in_imu_span(late, imu)
+    assert "IMU from" in str(exc.value) and "GNSS from" in str(exc.value)
+
+
+def test_time_offset_estimation_names_too_few_moving_epochs(recording):
+    imu = read_trajectory_csv(recording / "imu.csv", required=())
+    gnss = read_trajectory_csv(recording / "gnss.csv")
+    with pytest.raises(InsgnssError) as exc:
+        estimate_time_offset(imu, gnss.loc[:25.0])  # the static start only
+    assert "moving" in str(exc.value) and "turning" not in str(exc.value)
