@@ -49,12 +49,19 @@ class Rule:
 
     ``doc`` is the valid range as docs/jobs.md prints it (a string, or a callable returning
     one, for lists defined elsewhere); ``check(value, key, file)`` returns the normalised value
-    or raises :class:`ConfigError` naming ``key``.
+    or raises :class:`ConfigError` naming ``key``. Numeric rules also carry ``bounds`` =
+    ``(lo, hi, lo_open, hi_open)`` (None: unbounded), array rules the ``item`` rule and
+    ``length`` (``None``: windows), so that tools can reach the documented extremes
+    (bench/bench_extremes.py).
     """
 
-    def __init__(self, doc: str | Callable[[], str], check: Callable[[Any, str, Any], Any]):
+    def __init__(self, doc: str | Callable[[], str], check: Callable[[Any, str, Any], Any], *,
+                 bounds: tuple | None = None, item: Rule | None = None, length: int | None = 0):
         self._doc = doc
         self.check = check
+        self.bounds = bounds
+        self.item = item
+        self.length = length
 
     @property
     def doc(self) -> str:
@@ -92,7 +99,7 @@ def _number(lo: float | None = None, hi: float | None = None, *, lo_open: bool =
             raise _fail("value out of range", key, file, doc, repr(v))
         return x
 
-    return Rule(doc, check)
+    return Rule(doc, check, bounds=(lo, hi, lo_open, hi_open))
 
 
 FINITE = _number()
@@ -116,7 +123,7 @@ def _vector(n: int, item: Rule = FINITE) -> Rule:
             out.append(_value(item, x, key, file, f"element {i + 1}"))
         return out
 
-    return Rule(doc, check)
+    return Rule(doc, check, item=item, length=n)
 
 
 def _windows(unit: str = "s") -> Rule:
@@ -141,7 +148,7 @@ def _windows(unit: str = "s") -> Rule:
             out.append([a, b])
         return out
 
-    return Rule(doc, check)
+    return Rule(doc, check, item=FINITE, length=None)
 
 
 def _integer(lo: int) -> Rule:
@@ -191,7 +198,7 @@ def _flag_table(value: Rule) -> Rule:
             out[str(q)] = _value(value, x, key, file, k)
         return out
 
-    return Rule(doc, check)
+    return Rule(doc, check, item=value)
 
 
 def _value(rule: Rule, x, key, file, element) -> Any:

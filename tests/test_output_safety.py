@@ -325,8 +325,9 @@ def test_two_process_runs_half_a_second_apart(tmp_path, sim_job, wait):
     s = _snapshot_ok(out)
     if wait:
         assert first.returncode == 0 and second.returncode == 0, (r1[1], r2[1])
-        assert "waiting" in r2[1] or "waiting" in r1[1]
-        assert s["seed"] == 2  # the second run waited and replaced the set as a whole
+        waited = [seed for seed, (_, err) in ((1, r1), (2, r2)) if "waiting" in err]
+        assert len(waited) == 1, (r1[1], r2[1])
+        assert s["seed"] == waited[0]  # the run that waited replaced the set as a whole
     else:
         codes = sorted([first.returncode, second.returncode])
         assert codes == [0, 2], (r1[1], r2[1])

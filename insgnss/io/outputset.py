@@ -134,6 +134,7 @@ def _alive(info: dict) -> bool:
     return True
 
 
+_CLOEXEC = getattr(os, "O_CLOEXEC", 0)
 #: output folders this process holds: resolved path -> [OutputLock, count]
 _HELD: dict[str, list] = {}
 
@@ -180,7 +181,8 @@ class OutputLock:
         info = {"pid": os.getpid(), "host": socket.gethostname(),
                 "started": time.strftime("%Y-%m-%dT%H:%M:%S%z")}
         os.ftruncate(fd, 0)
-        os.pwrite(fd, (json.dumps(info) + "\n").encode(), 0)
+        os.lseek(fd, 0, os.SEEK_SET)
+        os.write(fd, (json.dumps(info) + "\n").encode())
         os.fsync(fd)
         self._fd, self._key, self._holding = fd, key, True
         _HELD[key] = [self, 1]
@@ -193,7 +195,7 @@ class OutputLock:
         except ImportError:  # pragma: no cover - not POSIX
             fcntl = None
         if fcntl is not None:
-            fd = os.open(self.path, os.O_RDWR | os.O_CREAT | os.O_CLOEXEC, 0o644)
+            fd = os.open(self.path, os.O_RDWR | os.O_CREAT | _CLOEXEC, 0o644)
             try:
                 fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
             except OSError as exc:
@@ -217,7 +219,7 @@ class OutputLock:
                 return fd, {}
         # no flock: exclusive creation; a lock of a dead process on this host is stale
         try:
-            return os.open(self.path, os.O_RDWR | os.O_CREAT | os.O_EXCL | os.O_CLOEXEC,
+            return os.open(self.path, os.O_RDWR | os.O_CREAT | os.O_EXCL | _CLOEXEC,
                            0o644), {}
         except FileExistsError:
             old = _lock_info(self.path)
