@@ -12,7 +12,8 @@ job reads set to one end of its valid range in the schema (``insgnss.config``, d
 - ``high``: closed upper bounds, just below open ones, ``BIG`` where the range is unbounded;
 - ``work``: only the keys that set the amount of work and memory (:data:`WORK_KEYS`) at their
   low end, so that the run goes through them instead of stopping at the first refusal (the
-  static-window limits at their low end stop ``low`` at the alignment, by design);
+  static-window limits at their low end stop ``low`` at the alignment, by design; the
+  periodic outages start at 40 s, so that the initialization has GNSS);
 
 for the strapdown and the RISS process model, each ``insgnss process`` run in its own process
 under an address-space limit (``prlimit --as``, default 4 GiB). ``--each`` also runs every key
@@ -50,8 +51,8 @@ BIG = 1e9
 IMU_RATE = 100.0
 #: the keys whose low end sets the amount of work and memory of a run
 WORK_KEYS = ("filter.epoch_interval", "filter.propagation_interval", "aiding.nhc_interval",
-             "aiding.zupt_interval", "outages.windows", "outages.periodic.start",
-             "outages.periodic.length", "outages.periodic.gap", "inputs.imu.max_gap")
+             "aiding.zupt_interval", "outages.windows", "outages.periodic.length",
+             "outages.periodic.gap", "inputs.imu.max_gap")
 
 SCENARIO = """
 [scenario]
@@ -133,7 +134,8 @@ def extreme_value(spec: dict, side: str, dt: float, current):
         return None
     span = spec["min_imu_intervals"] * dt
     if rule.bounds is not None:
-        return extreme_number(rule, side, span)
+        v = extreme_number(rule, side, span)
+        return int(min(v, 2 ** 31)) if spec["type"] is int and v is not None else v
     if rule.item is None or rule.item.bounds is None:
         return None
     if rule.length is None:  # windows: one of the shortest allowed, or one over everything

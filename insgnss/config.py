@@ -159,7 +159,7 @@ def _integer(lo: int) -> Rule:
             raise _fail("value out of range", key, file, f"an integer >= {lo}", repr(v))
         return v
 
-    return Rule(f"integer >= {lo}", check)
+    return Rule(f"integer >= {lo}", check, bounds=(lo, None, False, False))
 
 
 def _integers(lo: int, hi: int) -> Rule:
@@ -364,7 +364,7 @@ def _spec(kind, default=None, doc: str = "", choices=None, check: Rule | None = 
 
 POSITIVE_SECONDS = _number(0.0, lo_open=True, note="s")
 
-#: Schema: table -> key -> spec. A spec whose type is ``dict`` with a ``"keys"`` entry is a
+#: Schema: table -> key -> spec (:func:`_spec`); a dict without a ``"type"`` entry is a
 #: sub-table. ``_ANY`` accepts any TOML value.
 SCHEMA: dict[str, Any] = {
     "job": {
@@ -631,19 +631,27 @@ SCHEMA: dict[str, Any] = {
             "window": _spec(_NUM, 1.0, "RISS: pitch/roll smoothing window [s]", check=POSITIVE),
         },
         "imu_model": {
-            "gyro_bias_deg_h": _spec(_NUM, None, "overrides of the grade, datasheet units "
-                                     "(0: no such error)", check=NONNEGATIVE),
+            "gyro_bias_deg_h": _spec(_NUM, None, "overrides of the grade, datasheet units: "
+                                     "turn-on gyro bias [deg/h] (the initial sigma of an "
+                                     "estimated state, so > 0)", check=POSITIVE),
             "accel_bias_mg": _spec(_NUM, None, "turn-on accelerometer bias [mg]",
-                                   check=NONNEGATIVE),
-            "gyro_bias_instability_deg_h": _spec(_NUM, None, "[deg/h]", check=NONNEGATIVE),
-            "accel_bias_instability_ug": _spec(_NUM, None, "[ug]", check=NONNEGATIVE),
+                                   check=POSITIVE),
+            "gyro_bias_instability_deg_h": _spec(_NUM, None, "[deg/h] (0: a constant bias)",
+                                                 check=NONNEGATIVE),
+            "accel_bias_instability_ug": _spec(_NUM, None, "[ug] (0: a constant bias)",
+                                               check=NONNEGATIVE),
             "bias_correlation_time_s": _spec(_NUM, None, "[s]", check=POSITIVE),
             "gyro_arw_deg_sqrt_h": _spec(_NUM, None, "angle random walk [deg/sqrt(h)]",
                                          check=POSITIVE),
             "accel_vrw_m_s_sqrt_h": _spec(_NUM, None, "velocity random walk [m/s/sqrt(h)]",
                                           check=POSITIVE),
-            "gyro_scale_ppm": _spec(_NUM, None, "[ppm]", check=NONNEGATIVE),
-            "accel_scale_ppm": _spec(_NUM, None, "[ppm]", check=NONNEGATIVE),
+            "gyro_scale_ppm": _spec(_NUM, None, "initial sigma of the estimated gyro scale "
+                                    "factors [ppm]", check=POSITIVE,
+                                    when=_on("filter.scale_factors")),
+            "accel_scale_ppm": _spec(_NUM, None, "initial sigma of the estimated "
+                                     "accelerometer scale factors [ppm]", check=POSITIVE,
+                                     when=(_on("filter.scale_factors"),
+                                           _is("filter.process_model", "strapdown"))),
         },
     },
     "evaluation": {
@@ -686,7 +694,7 @@ def _finish_schema() -> None:
     """Conditions shared by whole tables (one place instead of on every key)."""
     reader_keys = {"format", "path", "tag", "columns", "gyro_unit", "accel_unit", "time_unit",
                    "time_offset", "axis_map", "mounting_deg", "mounting_convention",
-                   "sensor_axes", "rate_hz", "delimiter", "header"}
+                   "sensor_axes", "rate_hz", "delimiter", "header", "header_rows"}
     for key, spec in iter_schema():
         parts = key.split(".")
         extra: list[When] = []
@@ -819,7 +827,7 @@ def _check_use(settings: dict, given: set, simulation: dict, file) -> None:
     if settings["process"]["preset"] != "standard":
         return
     if a["cupt"]:
-        if sim:
+        if sim is not None:
             raise ConfigError("CUPT needs surveyed control points (inputs.control_points.path, "
                               "recorded data); insgnss compare simulates them for a scenario",
                               file=file, column="aiding.cupt")

@@ -43,3 +43,27 @@ def test_extreme_job_completes_or_refuses_cleanly(tmp_path, process_model, side)
     if side == "work":  # the memory and work extremes run through
         assert r["exit"] in (0, 3), r["stderr"][-2000:]
         assert (tmp_path / "out" / "summary.json").exists()
+
+
+def test_a_filter_stopped_at_its_first_epoch_still_gives_a_clean_result(tmp_path):
+    """A singular initial covariance (a zero sigma of an estimated state, set in memory past
+    the loader) stops the filter at t0; with ZUPT at the first sample the forward solution is
+    empty, and its evaluation raised an IndexError (found by bench_extremes)."""
+    import json
+    import warnings
+
+    from robustness_helpers import small_job
+
+    from insgnss.pipeline import evaluate_solution, run_job, write_outputs
+
+    job = small_job(filter="scale_factors = true", aiding="zupt = true")
+    job.settings["filter"]["imu_model"]["gyro_scale_ppm"] = 0.0
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        res = run_job(job, progress=False)
+        write_outputs(res, tmp_path)
+    assert not res.filter.complete and "positive definite" in res.summary["error"]
+    s = json.loads((tmp_path / "summary.json").read_text())
+    assert s["complete"] is False
+    empty = res.filter.forward.iloc[:0]
+    assert evaluate_solution(empty, res.inputs, res.windows, job) == {}

@@ -105,6 +105,11 @@ BAD_VALUES = [
     ({"filter": {"imu_model": {"gyro_arw_deg_sqrt_h": -1.0}}}, "filter.imu_model.gyro_arw_deg_sqrt_h"),
     ({"filter": {"imu_model": {"bias_correlation_time_s": 0.0}}},
      "filter.imu_model.bias_correlation_time_s"),
+    # the initial sigma of an estimated state (found by bench_extremes: a singular P0 stopped
+    # the filter at its first epoch and the evaluation of the empty solution crashed)
+    ({"filter": {"scale_factors": True, "imu_model": {"gyro_scale_ppm": 0.0}}},
+     "filter.imu_model.gyro_scale_ppm"),
+    ({"filter": {"imu_model": {"accel_bias_mg": 0.0}}}, "filter.imu_model.accel_bias_mg"),
     ({"filter": {"process_model": "riss", "riss": {"window": 0.0}}}, "filter.riss.window"),
     ({"inputs": {"control_points": {"path": "cp.csv", "std": 0.0}}}, "inputs.control_points.std"),
     # names and strings
@@ -185,6 +190,8 @@ def test_extremes_inside_the_documented_ranges_are_accepted():
     ({"outages": {"periodic": {"stop_before_end": 10.0}}}, "outages.periodic.stop_before_end",
      "periodic"),
     ({"filter": {"nis_window": 0.0, "nis_bound": 10.0}}, "filter.nis_bound", "nis_window"),
+    ({"filter": {"imu_model": {"gyro_scale_ppm": 100.0}}}, "filter.imu_model.gyro_scale_ppm",
+     "scale_factors"),
     ({"inputs": {"imu": {**IMU, "estimate_time_offset": True}}},
      "inputs.imu.estimate_time_offset", "GNSS"),
 ])

@@ -16,7 +16,8 @@ from .result import JobResult
 def evaluate_solution(sol: pd.DataFrame, inputs: Inputs, windows, job: Job) -> dict:
     """Errors of one solution against the job's reference (empty without a reference):
     ``{"errors": table, "outages": table, "summary": dict}``."""
-    if inputs.reference is None or sol is None or not job["evaluation"]["enabled"]:
+    if inputs.reference is None or sol is None or not len(sol) or \
+            not job["evaluation"]["enabled"]:  # (a filter stopped at its first epoch)
         return {}
     pt = move_point(sol, inputs.lever_arm) if inputs.reference_point == "antenna" else sol
     err = position_errors(pt, inputs.reference)
