@@ -370,11 +370,13 @@ SCHEMA: dict[str, Any] = {
     "job": {
         "name": _spec(str, "job", "run name used in reports and summary.json"),
         "description": _spec(str, "", "free text, copied to summary.json"),
-        "time_base": _spec(str, "unspecified", "time base of every input's time stamps: each "
-                           "reader records the base it produced (docs/formats.md) and a "
-                           "different one is an error; two inputs in different bases are an "
-                           "error even when unspecified",
-                           choices=["gps", "sow", "unix_gpst", "utc_sod", "unspecified"]),
+        "time_base": _spec(str, "unspecified", "time base of every input's time stamps (gps "
+                           "seconds, seconds of week, unix_gpst, UTC seconds of day, run: "
+                           "seconds from the start of the recording): each reader records the "
+                           "base it produced (docs/formats.md) and a different one is an error; "
+                           "two inputs in different bases are an error even when unspecified",
+                           choices=["gps", "sow", "unix_gpst", "utc_sod", "run",
+                                    "unspecified"]),
     },
     "inputs": {
         "imu": {

@@ -524,11 +524,12 @@ def check_time_overlap(imu: pd.DataFrame, other: pd.DataFrame, what: str = "GNSS
     src_i = imu.attrs.get("source", "IMU table")
     src_o = other.attrs.get("source", f"{what} table")
     apart = b0 - a1 if b0 > a1 else a0 - b1
+    rows = source_rows(other)
     raise TimeOrderError(
         f"no overlap in time between the IMU and the {what} data: IMU from {a0!r} to {a1!r} s "
         f"({src_i}), {what} from {b0!r} to {b1!r} s ({src_o}), {apart:.6g} s apart "
         "(different time bases, a wrong date or a missing time offset?)", file=src_o,
-        column=other.attrs.get("time_column", "time"),
+        row=None if rows is None else int(rows[0]), column=other.attrs.get("time_column", "time"),
         expected=f"{what} epochs inside the IMU span {a0!r} to {a1!r} s",
         found=f"{b0!r} to {b1!r} s")
 

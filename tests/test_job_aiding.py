@@ -81,7 +81,8 @@ def test_variants_give_a_clean_message_naming_the_cause(case):
     if case == "outages":
         job = _job(**{"[outputs]": "[outages]\nwindows = [[-10.0, 1000.0]]\n\n[outputs]"})
     elif case == "day_late_gnss_velocity":
-        job = _job(**{'method = "static"': 'method = "gnss_velocity"'})
+        job = _job(**{'method = "static"\nstatic_duration = 15.0':
+                      'method = "gnss_velocity"'})  # (a static window is not read then)
     else:
         job = _job()
     inputs = load_inputs(job)
