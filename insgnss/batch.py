@@ -186,7 +186,7 @@ def run_batch(patterns: list[str] | tuple[str, ...], *, settings: str | Path | d
     Per-job outputs go to ``out_dir/<job name>/`` (names made unique) when ``write_outputs``
     and ``out_dir`` are given. Returns the :class:`BatchResult` (not written).
     """
-    from . import __version__
+    from ._version import __version__
     from .executors import InProcess
 
     files, empty = expand_jobs(list(patterns))

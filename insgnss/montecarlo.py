@@ -603,7 +603,7 @@ def run_montecarlo(job: Job | dict | str | Path, *, runs: int | None = None,
         Work unit with the signature of :func:`run_one` (default); must be picklable for the
         parallel back-ends.
     """
-    from . import __version__
+    from ._version import __version__
     from .executors import InProcess
 
     data, jpath = load_source(job)

@@ -17,8 +17,6 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-import numpy as np
-
 NAME = "mechanize"
 HELP = "free-inertial strapdown mechanization of an IMU CSV"
 
@@ -81,6 +79,8 @@ def register(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    import numpy as np
+
     from ..align import coarse_align
     from ..earth import GRAVITY_MODELS
     from ..errors import ConfigError

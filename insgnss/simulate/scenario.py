@@ -31,7 +31,7 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from .. import __version__
+from .._version import __version__
 from ..earth import GRAVITY_MODELS
 from ..errors import ConfigError
 from ..imu import ImuErrorModel, grade

@@ -1,0 +1,117 @@
+"""Start-up: the command line loads no heavy module, lazy exports, robust package import.
+
+Each check runs in a fresh interpreter (``sys.modules`` of the test process already holds
+everything).
+"""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+import textwrap
+import tomllib
+from pathlib import Path
+
+import pytest
+
+REPO = Path(__file__).resolve().parents[1]
+HEAVY = ("numpy", "pandas", "numba", "scipy", "matplotlib", "filterpy", "pyarrow", "allantools")
+
+
+def _python(code: str, cwd: Path | None = None, env: dict | None = None):
+    env = {**os.environ, "PYTHONPATH": str(REPO), **(env or {})}
+    return subprocess.run([sys.executable, "-c", textwrap.dedent(code)], capture_output=True,
+                          text=True, cwd=cwd, env=env, timeout=300)
+
+
+def test_help_imports_no_heavy_module():
+    out = _python(f"""
+        import contextlib, io, sys
+        from insgnss import cli
+        with contextlib.redirect_stdout(io.StringIO()) as buf:
+            assert cli.main([]) == 1  # no command: prints the help
+        assert "process" in buf.getvalue() and "simulate" in buf.getvalue()
+        for name in ("process", "simulate", "mechanize", "allan", "compare", "batch"):
+            with contextlib.suppress(SystemExit), contextlib.redirect_stdout(io.StringIO()):
+                cli.main([name, "--help"])
+        loaded = sorted(m for m in sys.modules if m.split(".")[0] in {HEAVY!r})
+        ours = sorted(m for m in sys.modules if m.startswith("insgnss.")
+                      and not m.startswith(("insgnss.commands", "insgnss.cli")))
+        print(loaded, ours)
+    """)
+    assert out.returncode == 0, out.stderr
+    loaded, ours = out.stdout.strip().split("] [")
+    assert loaded == "[", f"heavy modules imported by the CLI parser: {loaded}]"
+    # only the version, the lazy-export helper and the error classes
+    assert ours == "'insgnss._lazy', 'insgnss._version', 'insgnss.errors']"
+
+
+def test_lazy_top_level_exports():
+    import insgnss
+    from insgnss.mechanization import INSMechanization as M2
+    from insgnss.mechanization.strapdown import INSMechanization, NavState, mechanize
+
+    assert insgnss.INSMechanization is INSMechanization is M2
+    assert insgnss.NavState is NavState and insgnss.mechanize is mechanize
+    from insgnss import InsgnssError
+    from insgnss.errors import InsgnssError as E
+
+    assert InsgnssError is E
+    assert set(insgnss.__all__) <= set(dir(insgnss))
+    with pytest.raises(AttributeError, match="no attribute 'not_a_name'"):
+        insgnss.not_a_name  # noqa: B018
+    import insgnss.io as io
+
+    for name in io.__all__:
+        assert getattr(io, name) is not None, name
+    with pytest.raises(ImportError):
+        from insgnss.io import read_everything  # noqa: F401
+
+
+def test_version_single_source():
+    import insgnss
+    from insgnss._version import __version__
+
+    meta = tomllib.loads((REPO / "pyproject.toml").read_text())
+    assert "version" in meta["project"]["dynamic"]
+    assert meta["tool"]["setuptools"]["dynamic"]["version"] == {"attr": "insgnss._version.__version__"}
+    assert insgnss.__version__ == __version__
+    assert __version__.count(".") >= 2
+
+
+def test_cli_import_with_a_shadowing_checkout(tmp_path):
+    """A folder holding a checkout named ``insgnss`` (no ``__init__.py`` at its top) in the current
+    directory is found as a namespace package ``insgnss``, while the real package's modules come
+    from setuptools' editable finder (it maps the immediate children ``insgnss.X`` to the
+    checkout's package folder). ``import insgnss.cli`` must work there (it failed with "cannot
+    import name '__version__'"). The finder below reproduces that layout however insgnss is
+    installed."""
+    checkout = tmp_path / "insgnss"
+    (checkout / "docs").mkdir(parents=True)
+    (checkout / "README.md").write_text("another checkout\n")
+    code = f"""
+        import sys
+        from importlib.machinery import PathFinder
+
+        class ShadowedEditable:
+            @classmethod
+            def find_spec(cls, fullname, path=None, target=None):
+                if fullname == "insgnss":  # the cwd's folder: a namespace package
+                    return PathFinder.find_spec(fullname, [{str(tmp_path)!r}])
+                if fullname.rpartition(".")[0] == "insgnss":  # the editable finder's mapping
+                    return PathFinder.find_spec(fullname, [{str(REPO / "insgnss")!r}])
+                return None
+
+        sys.meta_path.insert(0, ShadowedEditable)
+        import insgnss
+        assert getattr(insgnss, "__file__", None) is None, "not shadowed: the test is void"
+        import insgnss.cli
+        print(insgnss.cli.__version__)
+        insgnss.cli.build_parser()
+    """
+    out = _python(code, cwd=tmp_path)
+    assert out.returncode == 0, out.stderr
+    from insgnss._version import __version__
+
+    assert out.stdout.strip() == __version__
