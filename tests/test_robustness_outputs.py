@@ -26,7 +26,7 @@ import os, sys, time
 import insgnss.io.native as native
 mode = sys.argv[1]
 if mode == "slow_write":
-    def csv_writer(out):
+    def csv_writer(out, **_):
         text = out.to_csv(float_format="%.15g", na_rep="nan")
         def write(p):
             with open(p, "w") as fh:

@@ -43,7 +43,7 @@ from ..validate import (
 )
 from .gpstime import WEEK_SECONDS, week_sow_from_gps_seconds
 from .imu_csv import imu_table_from_arrays, mounting_matrix
-from .native import atomic_write
+from .native import atomic_write, fixed_decimal_text
 
 IMU_COLUMNS = ("sow", "dtheta_x", "dtheta_y", "dtheta_z", "dv_x", "dv_y", "dv_z")
 GNSS_COLUMNS = ("sow", "lat", "lon", "h", "std_n", "std_e", "std_d")
@@ -196,11 +196,38 @@ def write_kfgins_nav(df: pd.DataFrame, path: str | os.PathLike, *, week: int | N
     else:
         w = _week(week) if week is not None else int(df.attrs.get("gps_week", 0) or 0)
         wk, sow = np.full(t.size, w), t
+    cols = _nav_columns(df, wk, sow)
+    return atomic_write(path, lambda p: _write_nav_text(cols, p))
+
+
+#: decimals of the .nav columns: week integer, sow 6 [s], lat/lon 10 [deg] (0.01 mm), h and
+#: velocities 5 [m, m/s], roll/pitch/yaw 8 [deg]
+NAV_DECIMALS = (0, 6, 10, 10, 5, 5, 5, 5, 8, 8, 8)
+
+
+def _nav_columns(df: pd.DataFrame, wk: np.ndarray, sow: np.ndarray) -> list[np.ndarray]:
+    """The 11 .nav columns (week, sow, lat lon [deg], h, v_NED, roll pitch yaw [deg, NED/FRD])."""
     vned = ned_to_enu(df[["vel_e", "vel_n", "vel_u"]].to_numpy(float))
     r, p, y = euler_to_ned(df["roll"].to_numpy(float), df["pitch"].to_numpy(float),
                            df["heading"].to_numpy(float))
-    table = np.column_stack([wk, sow, np.degrees(df["lat"].to_numpy(float)),
-                             np.degrees(df["lon"].to_numpy(float)), df["height"].to_numpy(float),
-                             vned, np.degrees(r), np.degrees(p), np.degrees(y)])
-    fmt = ["%d", "%.6f", "%.10f", "%.10f", "%.5f", "%.5f", "%.5f", "%.5f", "%.8f", "%.8f", "%.8f"]
-    return atomic_write(path, lambda p: np.savetxt(p, table, fmt=fmt, delimiter=" "))
+    return [np.asarray(wk, float), np.asarray(sow, float), np.degrees(df["lat"].to_numpy(float)),
+            np.degrees(df["lon"].to_numpy(float)), df["height"].to_numpy(float),
+            vned[:, 0], vned[:, 1], vned[:, 2], np.degrees(r), np.degrees(p), np.degrees(y)]
+
+
+def _write_nav_text(cols: list[np.ndarray], path, rows: int = 1 << 17) -> None:
+    """Space-separated fixed-decimal text, one line per epoch, byte-identical to
+    ``np.savetxt(path, np.column_stack(cols), fmt=["%d", "%.6f", ...], delimiter=" ")``,
+    formatted and written by pyarrow a batch of rows at a time."""
+    import pyarrow as pa
+    import pyarrow.csv as pacsv
+
+    names = [f"c{j}" for j in range(len(cols))]
+    opts = pacsv.WriteOptions(include_header=False, delimiter=" ", quoting_style="none")
+    schema = pa.schema([(n, pa.string()) for n in names])
+    with pacsv.CSVWriter(str(path), schema, write_options=opts) as w:
+        for i in range(0, len(cols[0]), rows):
+            w.write_batch(pa.RecordBatch.from_arrays(
+                [fixed_decimal_text(c[i:i + rows], d) for c, d in zip(cols, NAV_DECIMALS,
+                                                                      strict=True)],
+                names=names))

@@ -76,10 +76,10 @@ def write_trajectory_csv(df: pd.DataFrame, path: str | os.PathLike, *,
     """Write a time-indexed table as a native insgnss CSV (atomically); ``float_format=None``
     writes shortest round-trip floats with the fast writer (:func:`~.native.csv_writer`)."""
     ensure_not_input(path, [*protect, df.attrs.get("source")])
+    if float_format is None:
+        return atomic_write(path, csv_writer(df))
     out = to_file_columns(df)
     out.index = pd.Index(np.asarray(df.index, float), name="time")
-    if float_format is None:
-        return atomic_write(path, csv_writer(out))
     return atomic_write(path, lambda p: out.to_csv(p, float_format=float_format, na_rep="nan"))
 
 

@@ -1,0 +1,66 @@
+"""Column names of the trajectory tables and the output column groups (one place for both).
+
+A trajectory table (forward or smoothed solution, mechanization output, simulated truth) is
+indexed by time [s] and holds
+
+- navigation (:data:`NAV_COLS`): ``lat lon height`` [rad, rad, m] (geodetic, WGS84),
+  ``vel_e vel_n vel_u`` [m/s] (ENU), ``roll pitch heading`` [rad] (``R_b^l = Rz(-A) Rx(p) Ry(r)``,
+  heading clockwise from north);
+- their standard deviations (:data:`STD_COLS`): ``east_std north_std up_std`` [m] (position
+  error in the local level frame, not of lat/lon), ``vel_*_std`` [m/s], ``roll_std pitch_std
+  heading_std`` [rad];
+- estimated parameters with their standard deviations: gyro and accelerometer biases
+  ``gyro_bias_x ..`` [rad/s, m/s^2], scale factors ``gyro_scale_x ..`` [-], extra states (lever
+  arm, odometer scale, ...), each with a ``*_std`` column.
+
+The output groups of ``[outputs] columns`` (docs/jobs.md) select among these:
+``"nav"``, ``"std"``, ``"params"`` (every column that is neither navigation nor one of its
+standard deviations: biases, scale factors, extra states and their stds) and ``"all"``.
+The default, :data:`DEFAULT_OUTPUT_GROUPS`, is navigation with its standard deviations: what
+a user plots and compares; the parameters are for filter analysis and are written on request.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable, Sequence
+
+#: navigation solution: position (geodetic), ENU velocity, attitude
+NAV_COLS = ["lat", "lon", "height", "vel_e", "vel_n", "vel_u", "roll", "pitch", "heading"]
+#: one-sigma of the navigation solution (ENU position metres, not lat/lon)
+STD_COLS = ["east_std", "north_std", "up_std", "vel_e_std", "vel_n_std", "vel_u_std",
+            "roll_std", "pitch_std", "heading_std"]
+#: names of ``[outputs] columns``
+OUTPUT_GROUPS = ("nav", "std", "params", "all")
+#: default ``[outputs] columns``
+DEFAULT_OUTPUT_GROUPS = ("nav", "std")
+
+
+def output_columns(columns: Iterable[str], groups: Sequence[str]) -> list[str]:
+    """The columns of a table (in its order) that belong to the output ``groups``.
+
+    Parameters
+    ----------
+    columns : iterable of str
+        Columns of the trajectory table.
+    groups : sequence of str
+        Any of :data:`OUTPUT_GROUPS`.
+
+    Raises
+    ------
+    ValueError
+        For a group name not in :data:`OUTPUT_GROUPS`.
+    """
+    bad = [g for g in groups if g not in OUTPUT_GROUPS]
+    if bad:
+        raise ValueError(f"unknown output column group {bad[0]!r}: expected one of "
+                         f"{', '.join(OUTPUT_GROUPS)}")
+    columns = list(columns)
+    if "all" in groups:
+        return columns
+    nav_std = set(NAV_COLS) | set(STD_COLS)
+    keep = set()
+    if "nav" in groups:
+        keep |= set(NAV_COLS)
+    if "std" in groups:
+        keep |= set(STD_COLS)
+    return [c for c in columns if c in keep or ("params" in groups and c not in nav_std)]
