@@ -2,16 +2,18 @@
 
 Run: ``python bench/bench_mechanize.py [--samples N]``. Prints numbers; not a timed test.
 The first call in a fresh process loads the numba cache (or compiles, when the cache is cold:
-``--cold`` deletes insgnss' numba cache files first and measures the compile time).
+``--cold`` runs with an empty temporary ``NUMBA_CACHE_DIR`` and measures the compile time; the
+package's own cache is left alone).
 """
 
 from __future__ import annotations
 
 import argparse
+import os
 import subprocess
 import sys
+import tempfile
 import time
-from pathlib import Path
 
 import numpy as np
 
@@ -34,10 +36,12 @@ def main() -> None:
     ap.add_argument("--repeat", type=int, default=5)
     ap.add_argument("--cold", action="store_true", help="measure compile time with an empty cache")
     args = ap.parse_args()
-    if args.cold:
-        root = Path(__file__).resolve().parents[1] / "insgnss"
-        for p in list(root.rglob("*.nbi")) + list(root.rglob("*.nbc")):
-            p.unlink()
+    if args.cold and not os.environ.get("INSGNSS_BENCH_COLD"):
+        # numba reads NUMBA_CACHE_DIR at import: run this benchmark again in a child process
+        # whose cache is an empty temporary folder
+        with tempfile.TemporaryDirectory(prefix="numba-cold-") as cache:
+            env = {**os.environ, "NUMBA_CACHE_DIR": cache, "INSGNSS_BENCH_COLD": "1"}
+            sys.exit(subprocess.run([sys.executable, *sys.argv], env=env).returncode)
     t0 = time.perf_counter()
     from insgnss.mechanization.strapdown import mechanize
 
@@ -55,7 +59,9 @@ def main() -> None:
           f"= {args.samples / best:,.0f} samples/s")
     if not args.cold:
         out = subprocess.run([sys.executable, __file__, "--cold", "--samples", "100000",
-                              "--repeat", "1"], capture_output=True, text=True)
+                              "--repeat", "1"], capture_output=True, text=True,
+                             env={k: v for k, v in os.environ.items()
+                                  if k != "INSGNSS_BENCH_COLD"})
         print("cold start:", out.stdout.splitlines()[0] if out.stdout else out.stderr[-500:])
 
 
