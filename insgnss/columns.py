@@ -13,6 +13,9 @@ indexed by time [s] and holds
   ``gyro_bias_x ..`` [rad/s, m/s^2], scale factors ``gyro_scale_x ..`` [-], extra states (lever
   arm, odometer scale, ...), each with a ``*_std`` column.
 
+and row labels (:data:`ROW_LABEL_COLS`: ``segment``, the part of a split run a row belongs
+to), which every output keeps.
+
 The output groups of ``[outputs] columns`` (docs/jobs.md) select among these:
 ``"nav"``, ``"std"``, ``"params"`` (every column that is neither navigation nor one of its
 standard deviations: biases, scale factors, extra states and their stds) and ``"all"``.
@@ -29,6 +32,8 @@ NAV_COLS = ["lat", "lon", "height", "vel_e", "vel_n", "vel_u", "roll", "pitch", 
 #: one-sigma of the navigation solution (ENU position metres, not lat/lon)
 STD_COLS = ["east_std", "north_std", "up_std", "vel_e_std", "vel_n_std", "vel_u_std",
             "roll_std", "pitch_std", "heading_std"]
+#: row labels, written with every column group
+ROW_LABEL_COLS = ["segment"]
 #: names of ``[outputs] columns``
 OUTPUT_GROUPS = ("nav", "std", "params", "all")
 #: default ``[outputs] columns``
@@ -57,8 +62,8 @@ def output_columns(columns: Iterable[str], groups: Sequence[str]) -> list[str]:
     columns = list(columns)
     if "all" in groups:
         return columns
-    nav_std = set(NAV_COLS) | set(STD_COLS)
-    keep = set()
+    nav_std = set(NAV_COLS) | set(STD_COLS) | set(ROW_LABEL_COLS)
+    keep = set(ROW_LABEL_COLS)
     if "nav" in groups:
         keep |= set(NAV_COLS)
     if "std" in groups:

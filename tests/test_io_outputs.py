@@ -173,6 +173,9 @@ def test_column_groups():
     assert np.shares_memory(view["lat"].to_numpy(), df["lat"].to_numpy())
     with pytest.raises(ConfigError, match="outputs.columns"):
         select_output_columns(df, ["nav", "biases"])
+    df["segment"] = 1  # split runs: the row label stays with every group
+    assert list(select_output_columns(df, ["nav"]).columns) == C.NAV_COLS + ["segment"]
+    assert list(select_output_columns(df, ["params"]).columns) == par + ["segment"]
 
 
 def test_column_names_are_the_engines():
