@@ -37,6 +37,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from .columns import DEFAULT_OUTPUT_GROUPS, OUTPUT_GROUPS, output_rate
 from .errors import ConfigError
 
 _ANY = object()
@@ -666,9 +667,16 @@ SCHEMA: dict[str, Any] = {
     "outputs": {
         "dir": _spec(str, "out", "output folder (relative to the job file)", check=NONEMPTY),
         "report": _spec(bool, True, "write report.html"),
-        "formats": _spec(list, ["csv"], "trajectory formats (eval: the drive benchmark "
-                         "scorer's CSV at the antenna)",
-                         choices=["csv", "nav", "kml", "geojson", "eval"]),
+        "formats": _spec(list, ["csv"], "trajectory formats: csv, parquet (the same columns, "
+                         "binary), nav (KF-GINS text), kml, geojson, eval (scorer CSV)",
+                         choices=["csv", "parquet", "nav", "kml", "geojson", "eval"]),
+        "columns": _spec(list, list(DEFAULT_OUTPUT_GROUPS), "trajectory column groups: nav, "
+                         "std (their sigmas), params (biases, scale factors, extra states and "
+                         "their sigmas), all (insgnss.columns)", choices=list(OUTPUT_GROUPS)),
+        "rate_hz": _spec((int, float, str), "auto", 'trajectory rate [Hz], "imu" (every '
+                         'sample) or "auto" (10 Hz; every sample with the foot preset); the '
+                         "samples around each GNSS and control-point epoch are always kept "
+                         "(insgnss.columns)", check=_via('a positive number [Hz], "imu" or "auto"', output_rate)),
         "figures": _spec(list, [], "report figures also written as fig_<name>.<ext> beside "
                          "the report", choices=["png", "pdf", "svg"],
                          when=_on("outputs.report")),

@@ -200,10 +200,13 @@ def test_decimation_grid():
     assert 100 <= len(rows) <= 102
     assert decimation_rows(t, "imu") is None and decimation_rows(t, None) is None
     assert decimation_rows(t, 500.0) is None  # above the data rate: every row
-    for bad in (0, -1.0, float("nan"), "10", True):
+    for bad in (0, -1.0, float("nan"), float("inf"), "10", True):
         with pytest.raises(ConfigError, match="outputs.rate_hz"):
             output_rate(bad)
     assert output_rate(" IMU ") is None and output_rate(4) == 4.0
+    assert output_rate("auto") == C.DEFAULT_OUTPUT_RATE == 10.0
+    assert output_rate("auto", "foot") is None  # foot INS: every sample
+    assert decimation_rows(t, "auto", preset="foot") is None
 
 
 def test_decimation_keeps_what_interpolation_at_the_epochs_sees():
@@ -234,3 +237,60 @@ def test_decimation_error_bound():
     dt = np.diff(dec.index).max()
     assert dt == pytest.approx(1 / out_rate, abs=1 / rate)
     assert 0.5 * A * w**2 * dt**2 / 8 < err.max() <= A * w**2 * dt**2 / 8
+
+
+# --- job keys and the written set ------------------------------------------------------------------
+
+def test_output_keys_checked_at_load():
+    from insgnss.config import load_job_dict
+
+    job = load_job_dict({})
+    assert job["outputs"]["columns"] == ["nav", "std"] and job["outputs"]["rate_hz"] == "auto"
+    ok = load_job_dict({"outputs": {"formats": ["parquet", "nav"], "columns": ["all"],
+                                    "rate_hz": 50}})
+    assert ok["outputs"]["rate_hz"] == 50
+    for key, value, found in (("formats", ["csv", "cvs"], "'cvs'"),
+                              ("columns", ["nav", "bias"], "'bias'"),
+                              ("rate_hz", 0, "0"), ("rate_hz", "fast", "'fast'"),
+                              ("rate_hz", [10], "list")):
+        with pytest.raises(ConfigError, match=f"outputs.{key}") as exc:
+            load_job_dict({"outputs": {key: value}})
+        assert found in str(exc.value)
+
+
+def test_written_trajectories_follow_the_output_keys(tmp_path):
+    """Defaults: nav + std columns at 10 Hz plus the samples around the GNSS epochs; Parquet
+    holds what the CSV holds; ``columns = ["all"]``, ``rate_hz = "imu"`` write everything."""
+    import warnings
+
+    from robustness_helpers import small_job
+
+    from insgnss.pipeline import run_job, write_outputs
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        res = run_job(small_job(outputs='formats = ["csv", "parquet", "nav"]'), progress=False)
+    write_outputs(res, tmp_path / "lean")
+    fwd = res.filter.forward
+    csv, par = read_table(tmp_path / "lean" / "forward.csv"), read_table(tmp_path / "lean" /
+                                                                            "forward.parquet")
+    assert list(csv.columns) == C.NAV_COLS + C.STD_COLS and len(fwd.columns) > 18
+    pd.testing.assert_frame_equal(csv, par, check_exact=False, rtol=1e-15)
+    t, tw = fwd.index.to_numpy(), csv.index.to_numpy()
+    gnss = res.inputs.gnss.index.to_numpy()
+    n_ticks = int(np.floor(t[-1] * 10) - np.ceil(t[0] * 10)) + 1
+    assert n_ticks <= len(tw) <= n_ticks + 2 * len(gnss) + 2 and len(tw) < len(t) / 3
+    gnss = gnss[(gnss >= t[0]) & (gnss <= t[-1])]
+    assert np.isin(gnss, tw).all()  # the epochs are IMU samples here: kept without a bracket
+    for c in ("lat", "vel_e", "heading"):  # at the epochs the file gives the full-rate values
+        np.testing.assert_allclose(np.interp(gnss, tw, csv[c]), np.interp(gnss, t, fwd[c]),
+                                   rtol=1e-14)
+    np.testing.assert_allclose(csv["lat"], fwd.loc[tw, "lat"], rtol=1e-15)
+    nav = (tmp_path / "lean" / "forward.nav").read_text().splitlines()
+    assert len(nav) == len(tw)
+
+    res.job.settings["outputs"].update(columns=["all"], rate_hz="imu", formats=["csv"])
+    write_outputs(res, tmp_path / "full")
+    full = read_table(tmp_path / "full" / "forward.csv")
+    assert list(full.columns) == list(fwd.columns) and len(full) == len(fwd)
+    assert not (tmp_path / "full" / "forward.parquet").exists()  # the previous set's files go

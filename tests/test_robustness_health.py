@@ -91,7 +91,7 @@ def test_nis_config_is_validated():
 
 def test_nan_in_the_imu_stops_and_writes_a_marked_partial_set(quiet, tmp_path):
     """NaN injected in memory after reading (the readers reject NaN in files)."""
-    job = small_job()
+    job = small_job(outputs='rate_hz = "imu"')  # every sample: the rows up to the stop
     inputs = load_inputs(job)
     imu = inputs.imu.copy()
     k = int(np.searchsorted(imu.index, imu.index[0] + 50.0))
@@ -121,7 +121,7 @@ def test_nan_in_the_imu_stops_and_writes_a_marked_partial_set(quiet, tmp_path):
 
 
 def test_a_complete_rerun_clears_the_incomplete_marker(quiet, tmp_path):
-    job = small_job()
+    job = small_job(outputs='rate_hz = "imu"')
     inputs = load_inputs(job)
     good = run_job(job, inputs=load_inputs(job), progress=False)
     imu = inputs.imu.copy()

@@ -21,6 +21,7 @@ import numpy as np
 import pandas as pd
 
 from ..columns import OUTPUT_GROUPS, output_columns
+from ..columns import output_rate as _output_rate
 from ..errors import ConfigError, InputFormatError
 
 _UMASK = os.umask(0)
@@ -240,24 +241,26 @@ def select_output_columns(df: pd.DataFrame, groups: Sequence[str]) -> pd.DataFra
     return df if len(cols) == df.shape[1] else df[cols]
 
 
-def output_rate(value: float | str | None) -> float | None:
-    """``[outputs] rate_hz`` as a rate [Hz], or None for every IMU sample (``"imu"``)."""
-    if value is None or (isinstance(value, str) and value.strip().lower() == "imu"):
-        return None
-    if isinstance(value, bool) or not isinstance(value, int | float | np.integer | np.floating) \
-            or not np.isfinite(value) or value <= 0:
-        raise ConfigError("output rate must be a positive number [Hz] or \"imu\"",
-                          column="outputs.rate_hz", expected='> 0 or "imu"', found=repr(value))
-    return float(value)
+def output_rate(value: float | str | None, preset: str = "standard") -> float | None:
+    """``[outputs] rate_hz`` as a rate [Hz], or None for every IMU sample
+    (:func:`insgnss.columns.output_rate`; a :class:`ConfigError` naming the key)."""
+    try:
+        return _output_rate(float(value) if isinstance(value, np.integer | np.floating)
+                            else value, preset)
+    except ValueError as exc:
+        raise ConfigError(str(exc), column="outputs.rate_hz", expected='> 0, "imu" or "auto"',
+                          found=repr(value)) from None
 
 
 def decimation_rows(t: np.ndarray, rate_hz: float | str | None,
-                    keep_times: Iterable[np.ndarray] = ()) -> np.ndarray | None:
+                    keep_times: Iterable[np.ndarray] = (), preset: str = "standard"
+                    ) -> np.ndarray | None:
     """Row numbers of a table at times ``t`` kept when writing it at ``rate_hz``.
 
     Kept: the first sample at or after each multiple of ``1 / rate_hz`` (so the output epochs
     do not depend on where the log starts), the first and the last sample, and for each time
-    in ``keep_times`` the last sample before it and the first at or after it. With the
+    in ``keep_times`` the first sample at or after it and, unless that sample is at the time,
+    the last one before it. With the
     measurement and reference epochs as ``keep_times``, linear interpolation of the written
     table at those epochs gives what it gives on the full table (a forward solution jumps at
     each update; a scorer interpolating across the jump from decimated samples would score a
@@ -265,8 +268,9 @@ def decimation_rows(t: np.ndarray, rate_hz: float | str | None,
     error of a decimated table is ``a dt^2 / 8`` (4 mm at 10 Hz and 3 m/s^2).
 
     Returns None when every row is kept (``rate_hz`` ``"imu"``/None, or at least the data rate).
+    ``"auto"`` is the rate of the process ``preset`` (:func:`insgnss.columns.output_rate`).
     """
-    rate = output_rate(rate_hz)
+    rate = output_rate(rate_hz, preset)
     t = np.asarray(t, float)
     n = t.size
     if rate is None or n < 3:
@@ -281,18 +285,19 @@ def decimation_rows(t: np.ndarray, rate_hz: float | str | None,
         kt = kt[(kt > t[0]) & (kt <= t[-1])]
         after = np.searchsorted(t, kt, side="left")
         keep[after] = True
-        keep[after - 1] = True
+        keep[after[t[after] != kt] - 1] = True  # an epoch on a sample needs no bracket
     if keep.all():
         return None
     return np.flatnonzero(keep)
 
 
 def decimate_table(df: pd.DataFrame, rate_hz: float | str | None,
-                   keep_times: Iterable[np.ndarray] = ()) -> pd.DataFrame:
+                   keep_times: Iterable[np.ndarray] = (), preset: str = "standard"
+                   ) -> pd.DataFrame:
     """``df`` at about ``rate_hz`` (``[outputs] rate_hz``; ``"imu"``: every sample), keeping
     the samples around ``keep_times`` (:func:`decimation_rows`). The table itself when every
     row is kept."""
-    rows = decimation_rows(np.asarray(df.index, float), rate_hz, keep_times)
+    rows = decimation_rows(np.asarray(df.index, float), rate_hz, keep_times, preset)
     return df if rows is None else df.iloc[rows]
 
 

@@ -8,7 +8,15 @@ import json
 from pathlib import Path
 
 from ..evaluate import move_point
-from ..io.native import atomic_write, atomic_write_text, jsonable, write_table
+from ..io.native import (
+    atomic_write,
+    atomic_write_text,
+    decimate_table,
+    jsonable,
+    select_output_columns,
+    write_parquet,
+    write_table,
+)
 from ..io.outputset import MARKER, OutputSet
 from ..report_data import REPORT_FILES
 from .result import JobResult
@@ -18,7 +26,7 @@ from .summary import incomplete_reason
 #: produce are removed when the new set is committed, so a folder never mixes two runs)
 OUTPUT_NAMES = tuple(
     [f"{t}{ext}" for t in ("forward", "smoothed")
-     for ext in (".csv", ".nav", ".kml", ".geojson", "_eval.csv")]
+     for ext in (".csv", ".parquet", ".nav", ".kml", ".geojson", "_eval.csv")]
     + ["innovations.csv", "rejected.csv", "outages_forward.csv", "outages_smoothed.csv",
        "summary.json", "report.html"] + list(REPORT_FILES))
 
@@ -43,13 +51,22 @@ def write_outputs(result: JobResult, out_dir: str | Path | None = None) -> dict[
         point = job["outputs"]["point"]
         tables = {"forward": result.filter.forward, "smoothed": result.filter.smoothed}
         formats = job["outputs"]["formats"]
+        # [outputs] rate_hz: the samples around the aiding epochs stay (the forward solution
+        # jumps there; insgnss.columns)
+        epochs = [x.index for x in (result.inputs.gnss, result.inputs.control_points)
+                  if x is not None]
         for name, df in tables.items():
             if df is None:
                 continue
+            df = tables[name] = decimate_table(df, job["outputs"]["rate_hz"], epochs,
+                                               job["process"]["preset"])
             if point == "antenna":
                 df = move_point(df, result.inputs.lever_arm)
+            table = select_output_columns(df, job["outputs"]["columns"])  # csv, parquet
             if "csv" in formats:
-                write_table(df, dest(f"{name}.csv"))
+                write_table(table, dest(f"{name}.csv"))
+            if "parquet" in formats:
+                write_parquet(table, dest(f"{name}.parquet"))
             if "nav" in formats:
                 from ..io.kfgins import write_kfgins_nav
 
