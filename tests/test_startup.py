@@ -47,6 +47,37 @@ def test_help_imports_no_heavy_module():
     assert ours == "'insgnss._lazy', 'insgnss._version', 'insgnss.errors']"
 
 
+def test_light_commands_import_no_filter_or_plotting(tmp_path):
+    """``insgnss simulate`` and ``insgnss mechanize`` (without --figure) run without the filter
+    package, filterpy or matplotlib."""
+    out = _python(f"""
+        import contextlib, io, sys
+        from pathlib import Path
+        import numpy as np
+        from insgnss.cli import main
+        tmp = Path({str(tmp_path)!r})
+        sc = tmp / "sc.toml"
+        sc.write_text('[scenario]\\nname = "s"\\nseed = 1\\nimu_rate = 100.0\\n'
+                      '[trajectory]\\nlat = 45.0\\nlon = 7.0\\nheight = 100.0\\n'
+                      'segments = [{{ type = "static", duration = 20.0 }}]\\n'
+                      '[imu]\\ngrade = "tactical"\\n')
+        with contextlib.redirect_stdout(io.StringIO()):
+            assert main(["simulate", str(sc), "-o", str(tmp / "sim")]) == 0
+            assert main(["mechanize", str(tmp / "sim" / "imu.csv"), "--lat", "45", "--lon", "7",
+                         "--height", "100", "--attitude", "0,0,0", "--gyro-unit", "rad",
+                         "--accel-unit", "m/s", "-o",
+                         str(tmp / "traj.csv")]) == 0
+        assert (tmp / "traj.csv").exists()
+        bad = sorted(m for m in sys.modules
+                     if m.split(".")[0] in ("matplotlib", "filterpy")
+                     or m.startswith(("insgnss.filter", "insgnss.pipeline", "insgnss.report",
+                                      "insgnss.plots")))
+        print(bad)
+    """)
+    assert out.returncode == 0, out.stderr
+    assert out.stdout.strip() == "[]"
+
+
 def test_lazy_top_level_exports():
     import insgnss
     from insgnss.mechanization import INSMechanization as M2
