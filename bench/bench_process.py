@@ -1,0 +1,321 @@
+"""Benchmark: the whole ``insgnss process`` run as a user runs it (issue: whole-process speed).
+
+Each run is a child process ``insgnss process JOB -o OUT --no-progress`` of this checkout
+(``PYTHONPATH`` set to it). Measured per run: wall time, peak resident memory of the child
+(``ru_maxrss`` from ``os.wait4``, the child's own ``getrusage``), throughput (IMU samples/s and
+times real time) and the size of what it wrote. Modes:
+
+- **warm**: the package's numba cache is filled by one untimed run first; the median of
+  ``--repeat`` runs is reported;
+- **cold**: one run with an empty temporary ``NUMBA_CACHE_DIR`` (every kernel compiled; the
+  package's cache is not touched);
+- **no report**: one warm run with ``--no-report``.
+
+Data sets:
+
+- ``sim``: a 1 h / 200 Hz simulated car drive (``scenarios/car_highway_tactical_outages.toml``
+  extended to ``--hours``: tactical IMU, 1 Hz GNSS position and velocity with 60 s outages),
+  written once with ``insgnss simulate`` into ``--data`` (reused when present) and processed
+  from its files with a job written beside them (native CSV inputs, truth as reference);
+- ``drive``: the real car drive ``scenarios/drive_0708.toml`` (55k samples at 100 Hz, RTK,
+  11 outages), skipped when the shared data is absent.
+
+The breakdown comes from ``summary.json`` ``timing_s`` (read, filter, smoother, the rest of
+the job) and from timers the child puts around its imports, ``write_outputs`` and the report
+(wrapped module attributes; the work is the same); the remainder is the interpreter's start and
+exit and the job loading.
+KF-GINS is timed only when a ``KF-GINS`` executable is on PATH; otherwise the issue's
+figures are printed for reference.
+
+Run: ``python bench/bench_process.py [--repeat 3] [--only sim|drive] [--no-cold]``. Prints
+numbers; not a timed test. The machine has 2 cores shared with other work: say so with the
+numbers (the load average is printed).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import shutil
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+REPO = Path(__file__).resolve().parents[1]
+SCENARIO = REPO / "scenarios" / "car_highway_tactical_outages.toml"
+DRIVE_JOB = REPO / "scenarios" / "drive_0708.toml"
+DEFAULT_DATA = Path(tempfile.gettempdir()) / "insgnss-bench-process"
+
+#: the job processing the simulated files (paths relative to the job file)
+SIM_JOB = """\
+# written by bench/bench_process.py: the simulated drive processed from its files
+[job]
+name = "sim_{hours:g}h_200hz"
+time_base = "run"
+
+[inputs.imu]
+format = "native"
+path = "imu.csv"
+rate_hz = 200.0
+
+[inputs.gnss]
+format = "native"
+path = "gnss.csv"
+lever_arm = [0.0, 1.2, 1.5]   # the scenario's antenna lever arm
+use_velocity = true
+
+[inputs.reference]
+format = "native"
+path = "truth.csv"
+point = "imu"
+
+[initialization]
+method = "static"
+static_duration = 60.0        # the scenario stands still for 120 s
+
+[aiding]
+gnss_velocity = true
+
+[filter]
+imu_grade = "tactical"
+smoother = true
+"""
+
+#: the speed issue's measurements (2026-12-01, same machine, median of 3 pairs)
+ISSUE_FIGURES = """\
+reference (speed issue, 2026-12-01): insgnss before the work / KF-GINS (forward only)
+  1 h / 200 Hz, default outputs:   11.9-16.5 s, 1,346 MiB  /  9.9-11.6 s, 4.6 MiB
+  1 h / 200 Hz, .nav only, no report: 8.1-9.9 s,  990 MiB  /  same
+  real drive (55k samples):          4.2-4.5 s,   450 MiB  /  0.8 s
+  cold numba cache, drive:          14.6 s
+  targets: 1 h <= 2.5 s warm and <= 400 MiB; drive <= 1.5 s warm, <= 6 s cold"""
+
+
+#: the child: ``insgnss process`` as the console script runs it, with timers around the
+#: imports, ``write_outputs`` and the report (module attributes wrapped; the work is unchanged)
+CHILD = r"""
+import atexit, importlib, json, os, sys, time
+t0 = time.perf_counter()
+marks = {}
+atexit.register(lambda: open(os.environ["BENCH_MARKS"], "w").write(json.dumps(marks)))
+import insgnss.cli, insgnss.pipeline
+marks["import"] = time.perf_counter() - t0
+
+def timed(f, key):
+    def wrapper(*a, **k):
+        t = time.perf_counter()
+        try:
+            return f(*a, **k)
+        finally:
+            marks[key] = marks.get(key, 0.0) + time.perf_counter() - t
+    return wrapper
+
+def report_timer():
+    t = time.perf_counter()
+    import insgnss.report as rep  # matplotlib: part of the report's cost
+    marks["report"] = time.perf_counter() - t
+    if not getattr(rep.write_report, "_timed", False):
+        rep.write_report = timed(rep.write_report, "report")
+        rep.write_report._timed = True
+
+mods = []
+for name in ("insgnss.job.outputs", "insgnss.pipeline"):  # the job layer may have moved it
+    try:
+        mods.append(importlib.import_module(name))
+    except ImportError:
+        pass
+original = next(m.write_outputs for m in mods if hasattr(m, "write_outputs"))
+def write_outputs(result, *a, **k):
+    if result.job["outputs"]["report"]:
+        report_timer()
+    return original(result, *a, **k)
+wrapped = timed(write_outputs, "write_outputs")
+for mod in mods:
+    if getattr(mod, "write_outputs", None) is original:
+        mod.write_outputs = wrapped
+from insgnss.cli import main
+sys.exit(main())
+"""
+
+
+@dataclass
+class Run:
+    wall: float
+    rss_mib: float
+    code: int
+    summary: dict = field(default_factory=dict)
+    written_mb: float = 0.0
+    stderr: str = ""
+    marks: dict = field(default_factory=dict)
+
+
+def child_env(cache_dir: str | None = None) -> dict:
+    env = dict(os.environ)
+    env["PYTHONPATH"] = os.pathsep.join([str(REPO), *filter(None, [env.get("PYTHONPATH")])])
+    if cache_dir is not None:
+        env["NUMBA_CACHE_DIR"] = cache_dir
+    return env
+
+
+def run_child(argv: list[str], env: dict) -> tuple[float, float, int, str]:
+    """Run ``python argv`` and return (wall s, peak RSS MiB, exit code, stderr tail)."""
+    with tempfile.TemporaryFile("w+") as err, open(os.devnull, "w") as out:
+        t0 = time.perf_counter()
+        proc = subprocess.Popen([sys.executable, *argv], stdout=out, stderr=err, env=env)
+        _, status, usage = os.wait4(proc.pid, 0)
+        wall = time.perf_counter() - t0
+        proc.returncode = os.waitstatus_to_exitcode(status)
+        err.seek(0)
+        tail = err.read()[-2000:]
+    return wall, usage.ru_maxrss / 1024.0, proc.returncode, tail  # ru_maxrss: KiB on Linux
+
+
+def process(job: Path, *, cold: bool = False, report: bool = True) -> Run:
+    """One ``insgnss process`` run into a temporary folder."""
+    with tempfile.TemporaryDirectory(prefix="bench-process-") as tmp:
+        out = Path(tmp) / "out"
+        cache = Path(tmp) / "numba-cache" if cold else None
+        marks = Path(tmp) / "marks.json"
+        argv = ["-c", CHILD, "process", str(job), "-o", str(out), "--no-progress"] + \
+            ([] if report else ["--no-report"])
+        env = child_env(None if cache is None else str(cache))
+        env["BENCH_MARKS"] = str(marks)
+        wall, rss, code, err = run_child(argv, env)
+        marks = json.loads(marks.read_text()) if marks.exists() else {}
+        summary = {}
+        if (out / "summary.json").exists():
+            summary = json.loads((out / "summary.json").read_text())
+        size = sum(p.stat().st_size for p in out.rglob("*") if p.is_file()) if out.exists() else 0
+    return Run(wall, rss, code, summary, size / 1e6, err, marks)
+
+
+def simulated_job(data: Path, hours: float) -> Path:
+    """Simulate the drive once (``insgnss simulate``) and write the job beside the files."""
+    folder = data / f"sim_{hours:g}h"
+    meta = folder / "metadata.json"
+    samples = round(3600 * hours * 200) + 1
+    if not (meta.exists() and json.loads(meta.read_text())["time"]["samples"] == samples):
+        print(f"simulating {hours:g} h at 200 Hz into {folder} (once) ...", flush=True)
+        argv = ["-m", "insgnss.cli", "simulate", str(SCENARIO), "-o", str(folder),
+                "--duration", str(3600.0 * hours)]
+        r = subprocess.run([sys.executable, *argv], env=child_env(), capture_output=True,
+                           text=True)
+        if r.returncode:
+            raise SystemExit(f"insgnss simulate failed:\n{r.stderr[-2000:]}")
+    job = folder / "job.toml"
+    job.write_text(SIM_JOB.format(hours=hours))
+    return job
+
+
+def describe(name: str, mode: str, runs: list[Run]) -> dict:
+    ok = [r for r in runs if r.code in (0, 3)]
+    if not ok:
+        print(f"{name}: {mode} run failed (exit {runs[0].code}):\n{runs[0].stderr}")
+        return {}
+    walls = [r.wall for r in ok]
+    best = min(ok, key=lambda r: abs(r.wall - statistics.median(walls)))
+    s = best.summary
+    n = int(s.get("imu_samples", 0))
+    segments = s.get("imu", {}).get("segments") or []
+    duration = sum(b - a for a, b in segments)  # seconds of data processed
+    row = {"name": name, "mode": mode, "wall": statistics.median(walls), "min": min(walls),
+           "max": max(walls), "rss": max(r.rss_mib for r in ok), "samples": n,
+           "duration": duration, "written": best.written_mb, "timing": s.get("timing_s", {}),
+           "marks": best.marks, "runs": len(ok)}
+    return row
+
+
+def print_table(rows: list[dict]) -> None:
+    print(f"\n{'data':10s} {'mode':10s} {'runs':>4s} {'wall s':>8s} {'(min-max)':>13s} "
+          f"{'peak RSS':>9s} {'samples/s':>11s} {'x real':>7s} {'written':>9s}")
+    for r in rows:
+        if not r:
+            continue
+        rate = r["samples"] / r["wall"] if r["wall"] else 0.0
+        real = r["duration"] / r["wall"] if r["wall"] else 0.0
+        print(f"{r['name']:10s} {r['mode']:10s} {r['runs']:4d} {r['wall']:8.2f} "
+              f"{r['min']:6.2f}-{r['max']:<6.2f} {r['rss']:6.0f} MiB {rate:11,.0f} "
+              f"{real:7.0f} {r['written']:6.0f} MB")
+
+
+def print_breakdown(warm: dict) -> None:
+    """Where the wall time of the median warm run went (s)."""
+    if not warm:
+        return
+    t, m = warm["timing"], warm["marks"]
+    filt = t.get("total", 0.0) - t.get("smoother", 0.0)
+    job_rest = t.get("job_total", 0.0) - t.get("read", 0.0) - t.get("total", 0.0)
+    report = m.get("report", 0.0)
+    parts = [("start-up (imports)", m.get("import", 0.0)), ("read", t.get("read", 0.0)),
+             ("filter (forward)", filt), ("smoother", t.get("smoother", 0.0)),
+             ("rest of the job (init, evaluation)", job_rest),
+             ("write (trajectories, logs, summary)", m.get("write_outputs", 0.0) - report),
+             ("report (matplotlib import + figures)", report)]
+    parts.append(("interpreter start and exit, job loading",
+                  warm["wall"] - sum(v for _, v in parts)))
+    print(f"\nbreakdown, {warm['name']} warm (median run, s):")
+    for name, v in parts:
+        print(f"  {name:42s} {v:6.2f}")
+    inner = ", ".join(f"{k} {v:.2f}" for k, v in t.items()
+                      if k in ("mechanization", "covariance", "updates", "output"))
+    print(f"  (filter: {inner})")
+    print(f"  {'wall':42s} {warm['wall']:6.2f}")
+
+
+def kfgins_baseline() -> None:
+    exe = shutil.which("KF-GINS") or shutil.which("kf-gins")
+    if exe is None:
+        print("\nKF-GINS: not available on this machine (no KF-GINS executable on PATH).")
+    else:  # a user's own configuration is needed; report where it is
+        print(f"\nKF-GINS found at {exe}: run it on the same data with its YAML configuration "
+              "to compare (not automated here).")
+    print(ISSUE_FIGURES)
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__,
+                                 formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--repeat", type=int, default=3, help="warm runs per data set (median)")
+    ap.add_argument("--only", choices=["sim", "drive"], help="one data set")
+    ap.add_argument("--hours", type=float, default=1.0, help="length of the simulated log")
+    ap.add_argument("--data", type=Path, default=DEFAULT_DATA,
+                    help=f"folder for the simulated log (default {DEFAULT_DATA})")
+    ap.add_argument("--no-cold", action="store_true", help="skip the cold-cache runs")
+    args = ap.parse_args()
+
+    print(f"insgnss {REPO}; python {sys.version.split()[0]}; {os.cpu_count()} cores; "
+          f"load average {' '.join(f'{x:.2f}' for x in os.getloadavg())}")
+    jobs = []
+    if args.only in (None, "drive"):
+        data = REPO.parent / "shared" / "data" / "gnss-imu-rtklibexplorer" / "drive_0708"
+        if data.exists():
+            jobs.append(("drive", DRIVE_JOB))
+        else:
+            print(f"drive: skipped, no data at {data}")
+    if args.only in (None, "sim"):
+        jobs.append((f"sim {args.hours:g} h", simulated_job(args.data, args.hours)))
+    rows = []
+    for name, job in jobs:
+        first = process(job)  # fills the package's numba cache: the warm runs load it
+        if first.code not in (0, 3):
+            print(f"{name}: failed (exit {first.code}):\n{first.stderr}")
+            continue
+        warm = describe(name, "warm", [process(job) for _ in range(args.repeat)])
+        noreport = describe(name, "no report", [process(job, report=False)])
+        cold = {} if args.no_cold else describe(name, "cold", [process(job, cold=True)])
+        rows += [warm, noreport, cold]
+        print_table([warm, noreport, cold])
+        print_breakdown(warm)
+    print("\nall runs:")
+    print_table(rows)
+    print(f"load average at the end {' '.join(f'{x:.2f}' for x in os.getloadavg())}")
+    kfgins_baseline()
+
+
+if __name__ == "__main__":
+    main()
