@@ -28,10 +28,13 @@ for vehicles (the ``standard`` process preset), every sample for the foot-mounte
 (``foot`` preset: steps reach ~30 m/s^2 within 0.1 s, and foot-INS scorers compare sample by
 sample). 10 Hz keeps the linear-interpolation error between written samples, ``a dt^2 / 8``,
 at 4 mm for 3 m/s^2 (a car turning or braking; 1 cm at 8 m/s^2), below the accuracy of an RTK
-reference, while writing 10 to 40 times fewer rows than a 100-400 Hz IMU. The writers also keep
-the samples on either side of every measurement and reference epoch
-(:func:`insgnss.io.native.decimation_rows`), so that a scorer interpolating the files at those
-epochs sees the same values as at the IMU rate (the drive_0708 scorer's numbers are identical).
+reference, while writing 10 to 40 times fewer rows than a 100-400 Hz IMU. The forward solution
+jumps at each GNSS or control-point update, so the writers also keep the samples on either side
+of those epochs (:func:`insgnss.io.native.decimation_rows`): a scorer interpolating the files
+at the GNSS epochs (an RTK reference from the same receiver, as for drive_0708) sees the values
+of the IMU-rate solution, and the drive_0708 scorer's numbers are identical. (A reference denser
+than the output rate, such as a simulated truth at the IMU rate, is interpolated between
+written samples, within ``a dt^2 / 8``.)
 """
 
 from __future__ import annotations

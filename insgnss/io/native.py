@@ -260,12 +260,12 @@ def decimation_rows(t: np.ndarray, rate_hz: float | str | None,
     Kept: the first sample at or after each multiple of ``1 / rate_hz`` (so the output epochs
     do not depend on where the log starts), the first and the last sample, and for each time
     in ``keep_times`` the first sample at or after it and, unless that sample is at the time,
-    the last one before it. With the
-    measurement and reference epochs as ``keep_times``, linear interpolation of the written
-    table at those epochs gives what it gives on the full table (a forward solution jumps at
-    each update; a scorer interpolating across the jump from decimated samples would score a
-    different number) and between them the trajectory is smooth: the linear-interpolation
-    error of a decimated table is ``a dt^2 / 8`` (4 mm at 10 Hz and 3 m/s^2).
+    the last one before it. With the aiding epochs as ``keep_times``, linear interpolation of
+    the written table at those epochs gives what it gives on the full table (a forward
+    solution jumps at each update; a scorer interpolating across the jump from decimated
+    samples would score a different number), and between them the trajectory is smooth: the
+    linear-interpolation error of a decimated table is ``a dt^2 / 8`` (4 mm at 10 Hz and
+    3 m/s^2).
 
     Returns None when every row is kept (``rate_hz`` ``"imu"``/None, or at least the data rate).
     ``"auto"`` is the rate of the process ``preset`` (:func:`insgnss.columns.output_rate`).
