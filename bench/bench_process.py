@@ -124,7 +124,7 @@ def report_timer():
         rep.write_report._timed = True
 
 mods = []
-for name in ("insgnss.job.outputs", "insgnss.pipeline"):  # the job layer may have moved it
+for name in ("insgnss.job.outputs", "insgnss.job.run", "insgnss.pipeline"):
     try:
         mods.append(importlib.import_module(name))
     except ImportError:
