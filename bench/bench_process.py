@@ -50,6 +50,8 @@ REPO = Path(__file__).resolve().parents[1]
 SCENARIO = REPO / "scenarios" / "car_highway_tactical_outages.toml"
 DRIVE_JOB = REPO / "scenarios" / "drive_0708.toml"
 DEFAULT_DATA = Path(tempfile.gettempdir()) / "insgnss-bench-process"
+#: the checkout whose insgnss the children run (``--code``; default this one)
+CODE = REPO
 
 #: the job processing the simulated files (paths relative to the job file)
 SIM_JOB = """\
@@ -156,7 +158,7 @@ class Run:
 
 def child_env(cache_dir: str | None = None) -> dict:
     env = dict(os.environ)
-    env["PYTHONPATH"] = os.pathsep.join([str(REPO), *filter(None, [env.get("PYTHONPATH")])])
+    env["PYTHONPATH"] = os.pathsep.join([str(CODE), *filter(None, [env.get("PYTHONPATH")])])
     if cache_dir is not None:
         env["NUMBA_CACHE_DIR"] = cache_dir
     return env
@@ -286,9 +288,14 @@ def main() -> None:
     ap.add_argument("--data", type=Path, default=DEFAULT_DATA,
                     help=f"folder for the simulated log (default {DEFAULT_DATA})")
     ap.add_argument("--no-cold", action="store_true", help="skip the cold-cache runs")
+    ap.add_argument("--code", type=Path, default=REPO,
+                    help="checkout whose insgnss is timed (e.g. another branch; default this "
+                    "one); the jobs and the scenario are this checkout's")
     args = ap.parse_args()
+    global CODE
+    CODE = args.code.resolve()
 
-    print(f"insgnss {REPO}; python {sys.version.split()[0]}; {os.cpu_count()} cores; "
+    print(f"insgnss {CODE}; python {sys.version.split()[0]}; {os.cpu_count()} cores; "
           f"load average {' '.join(f'{x:.2f}' for x in os.getloadavg())}")
     jobs = []
     if args.only in (None, "drive"):
