@@ -171,6 +171,7 @@ def parquet_writer(df: pd.DataFrame) -> Callable[[Path], None]:
     """A function writing the insgnss table ``df`` as a native Parquet file to a path: the
     columns of the CSV (``time``, angles in degrees ``*_deg``), float64, one row group per
     :data:`BATCH_ROWS` rows, and :data:`PARQUET_ATTRS` in the file's metadata."""
+    import pyarrow as pa
     import pyarrow.parquet as pq
 
     meta = {k: df.attrs[k] for k in PARQUET_ATTRS if df.attrs.get(k) is not None}
@@ -178,7 +179,10 @@ def parquet_writer(df: pd.DataFrame) -> Callable[[Path], None]:
     def write(p: Path) -> None:
         schema, batches = file_batches(df)
         schema = schema.with_metadata({b"insgnss": json.dumps(jsonable(meta)).encode()})
-        with pq.ParquetWriter(str(p), schema, compression="snappy") as w:
+        # no dictionary for float columns: their values hardly repeat, and trying costs 8x
+        dictionary = [f.name for f in schema if not pa.types.is_floating(f.type)]
+        with pq.ParquetWriter(str(p), schema, compression="snappy",
+                              use_dictionary=dictionary) as w:
             for b in batches:
                 w.write_batch(b)
 
