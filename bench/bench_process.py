@@ -164,11 +164,17 @@ def child_env(cache_dir: str | None = None) -> dict:
     return env
 
 
-def run_child(argv: list[str], env: dict) -> tuple[float, float, int, str]:
-    """Run ``python argv`` and return (wall s, peak RSS MiB, exit code, stderr tail)."""
+def run_child(argv: list[str], env: dict, cwd: str | os.PathLike
+              ) -> tuple[float, float, int, str]:
+    """Run ``python argv`` in ``cwd`` and return (wall s, peak RSS MiB, exit code, stderr tail).
+
+    ``cwd`` must not hold an ``insgnss`` folder: ``python -c`` puts the current folder first on
+    ``sys.path``, so a checkout there would be imported instead of ``CODE``.
+    """
     with tempfile.TemporaryFile("w+") as err, open(os.devnull, "w") as out:
         t0 = time.perf_counter()
-        proc = subprocess.Popen([sys.executable, *argv], stdout=out, stderr=err, env=env)
+        proc = subprocess.Popen([sys.executable, *argv], stdout=out, stderr=err, env=env,
+                                cwd=cwd)
         _, status, usage = os.wait4(proc.pid, 0)
         wall = time.perf_counter() - t0
         proc.returncode = os.waitstatus_to_exitcode(status)
@@ -187,7 +193,7 @@ def process(job: Path, *, cold: bool = False, report: bool = True) -> Run:
             ([] if report else ["--no-report"])
         env = child_env(None if cache is None else str(cache))
         env["BENCH_MARKS"] = str(marks)
-        wall, rss, code, err = run_child(argv, env)
+        wall, rss, code, err = run_child(argv, env, cwd=tmp)
         marks = json.loads(marks.read_text()) if marks.exists() else {}
         summary = {}
         if (out / "summary.json").exists():
@@ -203,10 +209,11 @@ def simulated_job(data: Path, hours: float) -> Path:
     samples = round(3600 * hours * 200) + 1
     if not (meta.exists() and json.loads(meta.read_text())["time"]["samples"] == samples):
         print(f"simulating {hours:g} h at 200 Hz into {folder} (once) ...", flush=True)
+        data.mkdir(parents=True, exist_ok=True)
         argv = ["-m", "insgnss.cli", "simulate", str(SCENARIO), "-o", str(folder),
                 "--duration", str(3600.0 * hours)]
         r = subprocess.run([sys.executable, *argv], env=child_env(), capture_output=True,
-                           text=True)
+                           text=True, cwd=data)
         if r.returncode:
             raise SystemExit(f"insgnss simulate failed:\n{r.stderr[-2000:]}")
     job = folder / "job.toml"
