@@ -181,7 +181,7 @@ def banner_html(summary: dict) -> str:
 def _version(summary: dict) -> str:
     if summary.get("version"):
         return str(summary["version"])
-    from . import __version__
+    from ._version import __version__
 
     return f"{__version__} (report writer)"
 

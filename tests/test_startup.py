@@ -111,6 +111,18 @@ def test_version_single_source():
     assert __version__.count(".") >= 2
 
 
+def test_no_submodule_takes_the_version_from_the_package():
+    """Under a shadowing namespace package ``insgnss`` has no ``__version__``: submodules read
+    it from ``insgnss._version``."""
+    import re
+
+    bad = [str(p.relative_to(REPO)) for p in (REPO / "insgnss").rglob("*.py")
+           if re.search(r"^\s*from (insgnss|\.+) import [^\n]*\b__version__\b", p.read_text(),
+                        re.MULTILINE)
+           and p.name != "__init__.py"]
+    assert bad == []
+
+
 def test_cli_import_with_a_shadowing_checkout(tmp_path):
     """A folder holding a checkout named ``insgnss`` (no ``__init__.py`` at its top) in the current
     directory is found as a namespace package ``insgnss``, while the real package's modules come
