@@ -1,45 +1,38 @@
-"""Foot-mounted pedestrian INS: stance detection, ZUPT + ZARU error-state filter, smoother.
+"""Foot-mounted pedestrian INS: stance detection, ZUPT + ZARU at every still IMU sample, smoother.
+
+The foot-mounted INS is the filter engine (:mod:`insgnss.filter.engine`) with the LLF strapdown
+process model (:class:`insgnss.filter.strapdown_model.StrapdownModel`) and high-rate ZUPT and
+ZARU measurements (:class:`~insgnss.filter.measurements.Zupt`,
+:class:`~insgnss.filter.measurements.Zaru` with ``high_rate=True``), applied on the engine's
+compiled path (:mod:`insgnss.filter.highrate`) at every still sample the stance detector
+(:mod:`insgnss.detect`) declares. This module holds the foot profile: the detector, the noise
+defaults and the initial alignment.
 
 Model
 -----
-The nominal trajectory is the LLF (ENU) strapdown of :mod:`insgnss.mechanization.strapdown`
-driven by bias-compensated increments. A 15-state error-state Kalman filter estimates
+The nominal trajectory is the strapdown mechanization of the bias-compensated increments. The
+15-state error (``nominal - true``)::
 
     x = [dp (ENU, m), dv (ENU, m/s), phi (l-frame misalignment, rad), dbg (rad/s), dba (m/s^2)]
 
-with the conventions ``est = true + error`` for p, v and the biases and
-``C_est = exp([phi x]) C_true`` for attitude (:func:`insgnss.attitude.attitude_error`). The
-continuous error dynamics used between updates are the short-term pedestrian form
-(Groves 2013 eq. 14.63 with the Earth-rate, transport-rate and gravity-gradient couplings
-dropped: over a walk of minutes they are below 1e-4 of the retained terms)::
+follows the strapdown error dynamics of :mod:`insgnss.filter.models`, propagated per IMU
+interval (``Phi = I + F dt``) with random-walk biases and, on a foot, a dynamics-dependent white
+noise: the velocity and attitude variances of an interval grow by ``(accel_dyn_noise |C dv -
+g dt|)^2`` and ``(gyro_dyn_noise |dtheta|)^2``, a white error of a fraction of each increment
+(unmodelled scale-factor, g-sensitivity and vibration errors, which dominate on a foot).
 
-    d(dp)/dt  = dv
-    d(dv)/dt  = -[f^l x] phi - C dba + w_a
-    d(phi)/dt = -C dbg + w_g
-    d(db)/dt  = w_b        (random walk)
+Measurements (:mod:`insgnss.filter.measurements`)::
 
-discretised per IMU interval as ``Phi = I + F dt``, ``Qd = diag(q) dt``. The nominal itself keeps
-the full Earth model (Earth rate, transport rate, normal gravity).
+    ZUPT  z = v_nom                           H = [0  I  0  0  0]          R = sigma_zupt,k^2 I
+    ZARU  z = w_ib,nom - C^T w_ie^l           H = [0  0  -C^T[w_ie x]  -I  0]   R = sigma_zaru^2 I
 
-Measurements (the same models as :mod:`insgnss.filter.measurements` ``Zupt`` / ``Zaru``)::
+on the still samples (every ``update_every``-th of a still run; ZARU only where the rate is
+below ``zaru_max_rate``); ``sigma_zupt,k`` grows with the detector statistic (soft ZUPT).
+Closed loop: after each update the estimate is fed back into the nominal and reset to zero.
 
-    ZUPT  z = v_est               H = [0  I  0  0  0]   R = sigma_zupt^2 I
-    ZARU  z = w_meas - bg_est - C^T w_ie^l
-                                  H = [0  0  0 -I  0]   R = sigma_zaru^2 I
-
-applied on samples the stillness detector (:mod:`insgnss.detect`) declares still, every
-``update_every``-th still sample. Closed loop: after each update the estimate is fed back into
-the nominal and the error state reset to zero.
-
-Smoother: the optional backward pass is the modified Bryson-Frazier form of the RTS smoother
-(Bierman 1973), which needs no inverse of the predicted covariance::
-
-    lambda~_k = H^T S^-1 nu + (I - K H)^T lambda^_k      (per update, in reverse order)
-    lambda^_{k-1} = Phi^T lambda~_k
-    x^s_k = P_{k|k} lambda^_k                          (relative to the fed-back nominal)
-
-Everything per IMU sample (strapdown, covariance, updates, smoother) runs in one compiled
-kernel, so the whole filter costs a few microseconds per sample.
+Smoother: the engine's modified Bryson-Frazier backward pass (:mod:`insgnss.filter.smoother`)
+over the nodes of the compiled path (one per IMU sample) gives the smoothed trajectory at every
+sample.
 
 Initial conditions: roll and pitch from accelerometer levelling over the first still window
 (``f^b = C^T [0, 0, g]``, so ``roll = atan2(-f_x, f_z)``, ``pitch = atan2(f_y, hypot(f_x,
@@ -59,394 +52,21 @@ from dataclasses import asdict, dataclass, field, fields
 
 import numpy as np
 import pandas as pd
-from numba import njit
 
 from . import earth
 from .align import level
-from .attitude import euler_to_dcm, euler_to_dcm_nb, rotvec_to_dcm_nb
+from .attitude import euler_to_dcm
 from .detect import DetectorConfig, Stillness, detect_arrays, imu_rates
-from .earth import OMEGA_E, radii
-from .errors import AlignmentError, ConfigError
-from .imu import increments
-from .mechanization.strapdown import NAV_COLS, STEP_WORK_SHAPE, NavState, strapdown_step
+from .errors import AlignmentError, ConfigError, FilterHealthError
+from .filter.engine import BIAS_COLS, FilterConfig, run_engine
+from .filter.measurements import Zaru, Zupt
+from .filter.strapdown_model import STD_COLS, StrapdownModel
+from .imu import ImuErrorModel, increments
+from .mechanization.strapdown import NAV_COLS, NavState
+from .stats import chi2_cdf
 
-N_STATES = 15
-IP, IV, IA, IG, IB = 0, 3, 6, 9, 12  # block offsets: position, velocity, attitude, gyro, accel bias
-
-BIAS_COLS = ["gyro_bias_x", "gyro_bias_y", "gyro_bias_z", "accel_bias_x", "accel_bias_y",
-             "accel_bias_z"]
-STD_COLS = ["east_std", "north_std", "up_std", "vel_e_std", "vel_n_std", "vel_u_std",
-            "roll_std", "pitch_std", "heading_std"]
-
-
-# --- compiled pieces -------------------------------------------------------------------------
-@njit(cache=True)
-def _propagate_cov(P, A, f, C, dt, qv, qa, qg, qb):
-    """``P <- Phi P Phi^T + Q dt`` with the sparse ``Phi = I + F dt`` of the module docstring."""
-    n = N_STATES
-    for j in range(n):
-        for i in range(3):
-            A[i, j] = P[i, j] + dt * P[3 + i, j]
-        pa0, pa1, pa2 = P[6, j], P[7, j], P[8, j]
-        cx = pa1 * f[2] - pa2 * f[1]  # phi x f  (= -[f x] phi)
-        cy = pa2 * f[0] - pa0 * f[2]
-        cz = pa0 * f[1] - pa1 * f[0]
-        b0, b1, b2 = P[12, j], P[13, j], P[14, j]
-        g0, g1, g2 = P[9, j], P[10, j], P[11, j]
-        A[3, j] = P[3, j] + dt * (cx - (C[0, 0] * b0 + C[0, 1] * b1 + C[0, 2] * b2))
-        A[4, j] = P[4, j] + dt * (cy - (C[1, 0] * b0 + C[1, 1] * b1 + C[1, 2] * b2))
-        A[5, j] = P[5, j] + dt * (cz - (C[2, 0] * b0 + C[2, 1] * b1 + C[2, 2] * b2))
-        A[6, j] = pa0 - dt * (C[0, 0] * g0 + C[0, 1] * g1 + C[0, 2] * g2)
-        A[7, j] = pa1 - dt * (C[1, 0] * g0 + C[1, 1] * g1 + C[1, 2] * g2)
-        A[8, j] = pa2 - dt * (C[2, 0] * g0 + C[2, 1] * g1 + C[2, 2] * g2)
-        for i in range(9, n):
-            A[i, j] = P[i, j]
-    # P = A Phi^T: apply the same row operation to the rows of A, written as columns of P
-    for j in range(n):
-        for i in range(3):
-            P[j, i] = A[j, i] + dt * A[j, 3 + i]
-        pa0, pa1, pa2 = A[j, 6], A[j, 7], A[j, 8]
-        cx = pa1 * f[2] - pa2 * f[1]
-        cy = pa2 * f[0] - pa0 * f[2]
-        cz = pa0 * f[1] - pa1 * f[0]
-        b0, b1, b2 = A[j, 12], A[j, 13], A[j, 14]
-        g0, g1, g2 = A[j, 9], A[j, 10], A[j, 11]
-        P[j, 3] = A[j, 3] + dt * (cx - (C[0, 0] * b0 + C[0, 1] * b1 + C[0, 2] * b2))
-        P[j, 4] = A[j, 4] + dt * (cy - (C[1, 0] * b0 + C[1, 1] * b1 + C[1, 2] * b2))
-        P[j, 5] = A[j, 5] + dt * (cz - (C[2, 0] * b0 + C[2, 1] * b1 + C[2, 2] * b2))
-        P[j, 6] = pa0 - dt * (C[0, 0] * g0 + C[0, 1] * g1 + C[0, 2] * g2)
-        P[j, 7] = pa1 - dt * (C[1, 0] * g0 + C[1, 1] * g1 + C[1, 2] * g2)
-        P[j, 8] = pa2 - dt * (C[2, 0] * g0 + C[2, 1] * g1 + C[2, 2] * g2)
-        for i in range(9, n):
-            P[j, i] = A[j, i]
-    for i in range(3):
-        P[3 + i, 3 + i] += qv * dt
-        P[6 + i, 6 + i] += qa * dt
-        P[9 + i, 9 + i] += qg * dt
-        P[12 + i, 12 + i] += qb * dt
-
-
-@njit(cache=True)
-def _adjoint_back(lam, f, C, dt):
-    """``lambda <- Phi^T lambda`` for the same ``Phi`` as :func:`_propagate_cov`."""
-    l0, l1, l2 = lam[0], lam[1], lam[2]
-    v0, v1, v2 = lam[3], lam[4], lam[5]
-    a0, a1, a2 = lam[6], lam[7], lam[8]
-    # (F^T lam)[3:6] += lam_p ; [6:9] += f x lam_v ; [12:15] += -C^T lam_v ; [9:12] += -C^T lam_a
-    lam[3] = v0 + dt * l0
-    lam[4] = v1 + dt * l1
-    lam[5] = v2 + dt * l2
-    lam[6] = a0 + dt * (f[1] * v2 - f[2] * v1)
-    lam[7] = a1 + dt * (f[2] * v0 - f[0] * v2)
-    lam[8] = a2 + dt * (f[0] * v1 - f[1] * v0)
-    for i in range(3):
-        lam[9 + i] -= dt * (C[0, i] * a0 + C[1, i] * a1 + C[2, i] * a2)
-        lam[12 + i] -= dt * (C[0, i] * v0 + C[1, i] * v1 + C[2, i] * v2)
-
-
-@njit(cache=True)
-def _inv3(S, out):
-    a, b, c = S[0, 0], S[0, 1], S[0, 2]
-    d, e, f = S[1, 0], S[1, 1], S[1, 2]
-    g, h, i = S[2, 0], S[2, 1], S[2, 2]
-    A = e * i - f * h
-    B = -(d * i - f * g)
-    Cc = d * h - e * g
-    det = a * A + b * B + c * Cc
-    out[0, 0] = A / det
-    out[1, 0] = B / det
-    out[2, 0] = Cc / det
-    out[0, 1] = -(b * i - c * h) / det
-    out[1, 1] = (a * i - c * g) / det
-    out[2, 1] = -(a * h - b * g) / det
-    out[0, 2] = (b * f - c * e) / det
-    out[1, 2] = -(a * f - c * d) / det
-    out[2, 2] = (a * e - b * d) / det
-    return det
-
-
-@njit(cache=True)
-def _update_block(P, b, sign, z, r, K, Sinv, dx, S, HP, gate):
-    """Kalman update for ``H = sign * [I at block b]``, ``R = r I``; ``dx = K z``.
-
-    Returns False (and leaves P unchanged) if the innovation covariance is not positive or the
-    normalised innovation squared ``z^T S^-1 z`` exceeds ``gate``.
-    """
-    n = N_STATES
-    for i in range(3):
-        for j in range(3):
-            S[i, j] = P[b + i, b + j]
-        S[i, i] += r
-    det = _inv3(S, Sinv)
-    if not det > 0.0:
-        return False
-    nis = 0.0
-    for i in range(3):
-        for j in range(3):
-            nis += z[i] * Sinv[i, j] * z[j]
-    if nis > gate:
-        return False
-    for i in range(n):
-        for m in range(3):
-            K[i, m] = sign * (P[i, b] * Sinv[0, m] + P[i, b + 1] * Sinv[1, m] + P[i, b + 2] * Sinv[2, m])
-    for i in range(n):
-        dx[i] = K[i, 0] * z[0] + K[i, 1] * z[1] + K[i, 2] * z[2]
-    # P <- P - K (H P);  H P = sign * P[b:b+3, :] (copied first: P is overwritten in place)
-    for m in range(3):
-        for j in range(n):
-            HP[m, j] = sign * P[b + m, j]
-    for i in range(n):
-        k0, k1, k2 = K[i, 0], K[i, 1], K[i, 2]
-        for j in range(i, n):
-            P[i, j] -= k0 * HP[0, j] + k1 * HP[1, j] + k2 * HP[2, j]
-    for i in range(n):
-        for j in range(i):
-            P[i, j] = P[j, i]
-    return True
-
-
-@njit(cache=True)
-def _feedback(pos, vel, C, bg, ba, dx, work):
-    """Apply an error estimate to the nominal: ``true = est - error``."""
-    M, N = radii(pos[0])
-    pos[0] -= dx[1] / (M + pos[2])
-    pos[1] -= dx[0] / ((N + pos[2]) * np.cos(pos[0]))
-    pos[2] -= dx[2]
-    for i in range(3):
-        vel[i] -= dx[3 + i]
-        bg[i] -= dx[9 + i]
-        ba[i] -= dx[12 + i]
-    phi = work[3, 0]
-    phi[0], phi[1], phi[2] = -dx[6], -dx[7], -dx[8]
-    E = work[0]
-    rotvec_to_dcm_nb(phi, E)
-    Cn = work[1]
-    for i in range(3):
-        for j in range(3):
-            Cn[i, j] = E[i, 0] * C[0, j] + E[i, 1] * C[1, j] + E[i, 2] * C[2, j]
-    for i in range(3):
-        for j in range(3):
-            C[i, j] = Cn[i, j]
-
-
-@njit(cache=True)
-def _nav_row(pos, vel, C, out):
-    out[0], out[1], out[2] = pos[0], pos[1], pos[2]
-    out[3], out[4], out[5] = vel[0], vel[1], vel[2]
-    out[6] = np.arctan2(-C[2, 0], C[2, 2])
-    out[7] = np.arctan2(C[2, 1], np.sqrt(C[0, 1] ** 2 + C[1, 1] ** 2))
-    a = np.arctan2(C[0, 1], C[1, 1])
-    out[8] = a + 2.0 * np.pi if a < 0.0 else a
-
-
-@njit(cache=True)
-def zupt_filter_kernel(t, dth, dv, rate, still, zaru, pos0, vel0, C0, bg0, ba0, P0, q, qdyn,
-                       r_zupt, r_zaru, gate, gate_zaru, update_every, gravity_model, smooth,
-                       nav_out, bias_out, std_out, nav_s_out, upd_nu):
-    """Forward ZUPT/ZARU filter over all samples and optional MBF smoother.
-
-    Parameters (arrays are C-contiguous float64 unless noted)
-    ----------
-    t (N,), dth (N,3), dv (N,3) : increments over (t[k-1], t[k]]
-    rate (N,3) : angular-rate samples for ZARU [rad/s]
-    still (N,) bool : ZUPT allowed at sample k;  zaru (N,) bool : ZARU allowed at sample k
-    pos0 (3,), vel0 (3,), C0 (3,3), bg0 (3,), ba0 (3,), P0 (15,15) : initial state
-    q (4,) : PSDs [vel (m/s)^2/s, att rad^2/s, gyro-bias (rad/s)^2/s, accel-bias (m/s^2)^2/s]
-    qdyn (2,) : dynamic noise factors: the velocity and attitude PSDs of an interval grow by
-        ``(qdyn[0] |f - g|)^2 dt`` and ``(qdyn[1] |w|)^2 dt``
-    r_zupt (N,) : ZUPT measurement variance per sample;  r_zaru : ZARU variance
-    gate, gate_zaru : chi-square (3 dof) innovation gates (``inf`` disables)
-    update_every : apply updates on every n-th sample of a still run (the first included)
-    nav_out (N,9), bias_out (N,6), std_out (N,9) : forward (filtered) outputs
-    nav_s_out (N,9) : smoothed navigation (written when ``smooth``)
-    upd_nu (N,6) : ZUPT and ZARU innovations (NaN where none)
-
-    Returns the number of updates applied.
-    """
-    n = t.shape[0]
-    pos = pos0.copy()
-    vel = vel0.copy()
-    C = C0.copy()
-    bg = bg0.copy()
-    ba = ba0.copy()
-    P = P0.copy()
-    A = np.empty((N_STATES, N_STATES))
-    work = np.empty((4, 3, 3))
-    # separate scratch for the strapdown kernel (its size is private to strapdown_step; 16 is
-    # generous)
-    sd_work = np.empty(STEP_WORK_SHAPE)
-    dthc = np.empty(3)
-    dvc = np.empty(3)
-    f = np.empty(3)
-    z = np.empty(3)
-    dx = np.empty(N_STATES)
-    S = np.empty((3, 3))
-    HP = np.empty((3, N_STATES))
-    Kt = np.empty((N_STATES, 3))
-    St = np.empty((3, 3))
-    wie = np.empty(3)
-    # smoother storage
-    m_alloc = 1
-    if smooth:
-        m_alloc = n
-    Prow = np.empty((m_alloc, 9, N_STATES))
-    fl = np.empty((m_alloc, 3))
-    Cs = np.empty((m_alloc, 3, 3))
-    n_upd_alloc = 1
-    if smooth:
-        n_upd_alloc = 2 * n
-    uk = np.empty(n_upd_alloc, np.int64)
-    ub = np.empty(n_upd_alloc, np.int64)
-    us = np.empty(n_upd_alloc)
-    uK = np.empty((n_upd_alloc, N_STATES, 3))
-    uSi = np.empty((n_upd_alloc, 3, 3))
-    unu = np.empty((n_upd_alloc, 3))
-    nupd = 0
-    run = 0
-    _nav_row(pos, vel, C, nav_out[0])
-    for i in range(3):
-        bias_out[0, i] = bg[i]
-        bias_out[0, 3 + i] = ba[i]
-    for i in range(9):
-        std_out[0, i] = np.sqrt(P[i, i])
-    for i in range(6):
-        upd_nu[0, i] = np.nan
-    if smooth:
-        for i in range(9):
-            for j in range(N_STATES):
-                Prow[0, i, j] = P[i, j]
-        for i in range(3):
-            fl[0, i] = 0.0
-            for j in range(3):
-                Cs[0, i, j] = C[i, j]
-    for k in range(1, n):
-        dt = t[k] - t[k - 1]
-        for i in range(3):
-            dthc[i] = dth[k, i] - bg[i] * dt
-            dvc[i] = dv[k, i] - ba[i] * dt
-        # the error-propagation matrix uses the attitude at the start of the interval
-        Cprev = work[2]
-        for i in range(3):
-            for j in range(3):
-                Cprev[i, j] = C[i, j]
-        for i in range(3):
-            f[i] = (Cprev[i, 0] * dvc[0] + Cprev[i, 1] * dvc[1] + Cprev[i, 2] * dvc[2]) / dt
-        if smooth:
-            for i in range(3):
-                fl[k, i] = f[i]
-                for j in range(3):
-                    Cs[k, i, j] = Cprev[i, j]
-        qv, qa = q[0], q[1]
-        if qdyn[0] > 0.0 or qdyn[1] > 0.0:
-            # unmodelled scale-factor / dynamics errors: white noise proportional to the
-            # dynamic specific force and the angular rate of this interval
-            fd2 = f[0] * f[0] + f[1] * f[1] + (f[2] - 9.80665) ** 2
-            w2 = (dthc[0] * dthc[0] + dthc[1] * dthc[1] + dthc[2] * dthc[2]) / (dt * dt)
-            qv += qdyn[0] * qdyn[0] * fd2 * dt
-            qa += qdyn[1] * qdyn[1] * w2 * dt
-        _propagate_cov(P, A, f, Cprev, dt, qv, qa, q[2], q[3])
-        strapdown_step(pos, vel, C, dthc, dvc, dt, gravity_model, 0, False, sd_work)
-        for i in range(6):
-            upd_nu[k, i] = np.nan
-        if still[k]:
-            if run % update_every == 0:
-                # ZUPT
-                z[0], z[1], z[2] = vel[0], vel[1], vel[2]
-                if _update_block(P, IV, 1.0, z, r_zupt[k], Kt, St, dx, S, HP, gate):
-                    _feedback(pos, vel, C, bg, ba, dx, work)
-                    for i in range(3):
-                        upd_nu[k, i] = z[i]
-                    if smooth:
-                        uk[nupd] = k
-                        ub[nupd] = IV
-                        us[nupd] = 1.0
-                        uK[nupd] = Kt
-                        uSi[nupd] = St
-                        unu[nupd, 0], unu[nupd, 1], unu[nupd, 2] = z[0], z[1], z[2]
-                    nupd += 1
-                if zaru[k]:
-                    cl, sl = np.cos(pos[0]), np.sin(pos[0])
-                    wie[0], wie[1], wie[2] = 0.0, OMEGA_E * cl, OMEGA_E * sl
-                    for i in range(3):
-                        z[i] = rate[k, i] - bg[i] - (C[0, i] * wie[0] + C[1, i] * wie[1]
-                                                     + C[2, i] * wie[2])
-                    if _update_block(P, IG, -1.0, z, r_zaru, Kt, St, dx, S, HP, gate_zaru):
-                        _feedback(pos, vel, C, bg, ba, dx, work)
-                        for i in range(3):
-                            upd_nu[k, 3 + i] = z[i]
-                        if smooth:
-                            uk[nupd] = k
-                            ub[nupd] = IG
-                            us[nupd] = -1.0
-                            uK[nupd] = Kt
-                            uSi[nupd] = St
-                            unu[nupd, 0], unu[nupd, 1], unu[nupd, 2] = z[0], z[1], z[2]
-                        nupd += 1
-            run += 1
-        else:
-            run = 0
-        _nav_row(pos, vel, C, nav_out[k])
-        for i in range(3):
-            bias_out[k, i] = bg[i]
-            bias_out[k, 3 + i] = ba[i]
-        for i in range(9):
-            std_out[k, i] = np.sqrt(P[i, i])
-        if smooth:
-            for i in range(9):
-                for j in range(N_STATES):
-                    Prow[k, i, j] = P[i, j]
-    if not smooth:
-        return nupd
-    # --- backward pass (modified Bryson-Frazier) ---
-    lam = np.zeros(N_STATES)
-    xs = np.empty(9)
-    ps = np.empty(3)
-    vs = np.empty(3)
-    Cn = np.empty((3, 3))
-    u = nupd - 1
-    for k in range(n - 1, -1, -1):
-        for i in range(9):
-            s = 0.0
-            for j in range(N_STATES):
-                s += Prow[k, i, j] * lam[j]
-            xs[i] = s
-        row = nav_out[k]
-        M, N = radii(row[0])
-        ps[0] = row[0] - xs[1] / (M + row[2])
-        ps[1] = row[1] - xs[0] / ((N + row[2]) * np.cos(row[0]))
-        ps[2] = row[2] - xs[2]
-        for i in range(3):
-            vs[i] = row[3 + i] - xs[3 + i]
-        # attitude: C_s = exp(-[phi x]) C_f
-        Cf = work[2]
-        euler_to_dcm_into(row[6], row[7], row[8], Cf)
-        E = work[0]
-        ph = work[3, 0]
-        ph[0], ph[1], ph[2] = -xs[6], -xs[7], -xs[8]
-        rotvec_to_dcm_nb(ph, E)
-        for i in range(3):
-            for j in range(3):
-                Cn[i, j] = E[i, 0] * Cf[0, j] + E[i, 1] * Cf[1, j] + E[i, 2] * Cf[2, j]
-        _nav_row(ps, vs, Cn, nav_s_out[k])
-        # updates at k, in reverse order: lam += H^T (S^-1 nu - K^T lam)
-        while u >= 0 and uk[u] == k:
-            b = ub[u]
-            sg = us[u]
-            for m in range(3):
-                ktl = 0.0
-                for i in range(N_STATES):
-                    ktl += uK[u, i, m] * lam[i]
-                sn = uSi[u, m, 0] * unu[u, 0] + uSi[u, m, 1] * unu[u, 1] + uSi[u, m, 2] * unu[u, 2]
-                z[m] = sg * (sn - ktl)
-            for m in range(3):
-                lam[b + m] += z[m]
-            u -= 1
-        if k > 0:
-            _adjoint_back(lam, fl[k], Cs[k], t[k] - t[k - 1])
-    return nupd
-
-
-euler_to_dcm_into = euler_to_dcm_nb  # one compiled implementation (insgnss.attitude)
+__all__ = ["FootConfig", "FootResult", "foot_detector", "foot_filter_arrays",
+           "foot_filter_config", "initial_state", "level", "level_window_mask", "run_foot_ins"]
 
 
 # --- configuration ---------------------------------------------------------------------------
@@ -487,14 +107,16 @@ class FootConfig:
         Apply the updates on every n-th still sample (1 = every sample).
     gate_zupt, gate_zaru : float
         Chi-square gates on the normalised innovation squared (3 degrees of freedom); an update
-        above it is skipped (``inf``: no gating). 16.27 is the 99.9 % point.
+        above it is skipped (``inf``: no gating). 16.27 is the 99.9 % point. The engine gates by
+        probability: these become ``chi2.cdf(gate, 3)``; its gate recovery applies.
     accel_psd, gyro_psd : float
         Velocity / angle random walk of the process model [m/s/sqrt(s)], [rad/sqrt(s)]
         (larger than the datasheet values: they also cover the unmodelled dynamics of a foot).
     accel_dyn_noise, gyro_dyn_noise : float
-        Dynamics-dependent process noise [sqrt(s)]: the velocity and attitude noise densities
-        of an interval grow by ``accel_dyn_noise * |f - g|`` and ``gyro_dyn_noise * |w|``
-        (unmodelled scale-factor, g-sensitivity and vibration errors, which dominate on a foot).
+        Dynamics-dependent process noise [fraction]: a white error of this fraction of each IMU
+        interval's dynamic velocity increment ``|C dv - g dt|`` and angle increment
+        ``|dtheta|`` (unmodelled scale-factor, g-sensitivity and vibration errors, which dominate
+        on a foot; ``FilterConfig.accel_dynamic_noise``).
     gyro_bias_rw, accel_bias_rw : float
         Bias random walks [rad/s/sqrt(s)], [m/s^2/sqrt(s)].
     init_att_std, init_heading_std, init_vel_std, init_pos_std : float
@@ -571,7 +193,8 @@ class FootResult:
     filtered one; both have ``NAV_COLS`` plus ``east north up`` [m] relative to the start.
     ``std`` holds the forward standard deviations, ``biases`` the bias estimates, ``stillness``
     the detector output and ``innovations`` the ZUPT (``zupt_*``) and ZARU (``zaru_*``)
-    innovations (NaN where no update).
+    innovations (NaN where no update); ``filter`` is the engine's result (innovation log,
+    nodes, timing).
     """
 
     trajectory: pd.DataFrame
@@ -582,6 +205,7 @@ class FootResult:
     innovations: pd.DataFrame
     n_updates: int
     initial: NavState
+    filter: object = None
 
 
 # --- front end -------------------------------------------------------------------------------
@@ -628,41 +252,88 @@ def _arr(x, dtype=float) -> np.ndarray:
     return np.require(x, dtype=dtype, requirements=["C", "W"])
 
 
+def _gate_probability(gate: float) -> float | None:
+    """The engine's gating probability of a 3-dof NIS threshold (None: no gate)."""
+    if not np.isfinite(gate):
+        return None
+    return float(chi2_cdf(gate, 3))
+
+
+def foot_filter_config(cfg: FootConfig, bg0, dt: float, duration: float) -> FilterConfig:
+    """The engine configuration of the foot profile: random-walk biases with the foot's
+    PSDs and initial stds, dynamics-dependent noise, the propagation at the IMU interval ``dt``
+    and one epoch segment over the walk (``duration`` [s]: every sample is a node of the
+    high-rate path), no runaway-NIS monitor, smoother without covariances."""
+    imu_model = ImuErrorModel(gyro_arw=cfg.gyro_psd, accel_vrw=cfg.accel_psd,
+                              gyro_rrw=cfg.gyro_bias_rw, accel_rrw=cfg.accel_bias_rw)
+    return FilterConfig(
+        imu_model=imu_model, bias_model="random_walk", propagation_interval=dt,
+        epoch_interval=max(duration, dt), gate_probability=None,
+        gate_probabilities={"zupt": _gate_probability(cfg.gate_zupt),
+                            "zaru": _gate_probability(cfg.gate_zaru)},
+        initial_pos_std=cfg.init_pos_std, initial_vel_std=cfg.init_vel_std,
+        initial_att_std=(cfg.init_att_std, cfg.init_att_std, cfg.init_heading_std),
+        initial_gyro_bias_std=cfg.init_gyro_bias_std,
+        initial_accel_bias_std=cfg.init_accel_bias_std, gyro_bias=tuple(np.asarray(bg0, float)),
+        gravity_model=cfg.gravity_model, smoother=cfg.smooth, smoother_covariance=False,
+        nis_window=None, accel_dynamic_noise=cfg.accel_dyn_noise,
+        gyro_dynamic_noise=cfg.gyro_dyn_noise)
+
+
+def foot_measurements(t, gyro, still, stat, bg0, cfg: FootConfig) -> list:
+    """High-rate ZUPT (soft: sigma from the detector statistic ``stat``) and ZARU models on the
+    still samples (every ``update_every``-th of a still run, never the first sample)."""
+    still = np.asarray(still, bool).copy()
+    still[0] = False  # the initial state
+    # position of each sample in its still run
+    start = np.flatnonzero(still & ~np.concatenate([[False], still[:-1]]))
+    run_id = np.cumsum(still & ~np.concatenate([[False], still[:-1]])) - 1
+    pos_in_run = np.arange(t.size) - start[np.maximum(run_id, 0)] if start.size else \
+        np.zeros(t.size, np.int64)
+    upd = still & (pos_in_run % cfg.update_every == 0)
+    sigma = np.full(t.size, cfg.sigma_zupt)
+    stat = np.asarray(stat, float)
+    if cfg.zupt_noise_exponent > 0 and np.all(np.isfinite(stat)):
+        sigma *= np.maximum(1.0, stat / cfg.zupt_noise_ref) ** cfg.zupt_noise_exponent
+    out = [Zupt(t[upd], std=sigma[upd], high_rate=True)]
+    if cfg.zaru:
+        z = upd.copy()
+        if cfg.zaru_max_rate < np.inf:
+            z &= np.linalg.norm(gyro - bg0, axis=1) < cfg.zaru_max_rate
+        out.append(Zaru(t[z], std=cfg.sigma_zaru, average=False, high_rate=True))
+    return out
+
+
 def foot_filter_arrays(t, dth, dv, gyro, still, stat, initial: NavState, bg0,
                        cfg: FootConfig) -> dict:
-    """Array core of :func:`run_foot_ins` (no pandas): increments ``dth, dv`` (N,3), rates
-    ``gyro`` (N,3) for ZARU, ``still`` flags, detector statistic ``stat`` (NaN: no soft ZUPT),
-    initial state and gyro bias. Returns a dict of arrays: ``nav``, ``nav_smoothed`` (N,9
-    :data:`NAV_COLS`), ``bias`` (N,6), ``std`` (N,9), ``innovations`` (N,6), ``n_updates``."""
-    n = t.size
-    P0 = np.diag(np.concatenate([
-        np.full(3, cfg.init_pos_std**2), np.full(3, cfg.init_vel_std**2),
-        [cfg.init_att_std**2, cfg.init_att_std**2, cfg.init_heading_std**2],
-        np.full(3, cfg.init_gyro_bias_std**2), np.full(3, cfg.init_accel_bias_std**2)]))
-    q = np.array([cfg.accel_psd**2, cfg.gyro_psd**2, cfg.gyro_bias_rw**2, cfg.accel_bias_rw**2])
-    qdyn = np.array([cfg.accel_dyn_noise, cfg.gyro_dyn_noise])
-    still = _arr(still, bool)
-    zaru = still.copy() if cfg.zaru else np.zeros(n, bool)
-    if cfg.zaru and cfg.zaru_max_rate < np.inf:
-        zaru &= np.linalg.norm(gyro - bg0, axis=1) < cfg.zaru_max_rate
-    r_zupt = np.full(n, cfg.sigma_zupt**2)
-    stat = _arr(stat)
-    if cfg.zupt_noise_exponent > 0 and np.all(np.isfinite(stat)):
-        r_zupt *= np.maximum(1.0, stat / cfg.zupt_noise_ref) ** (2.0 * cfg.zupt_noise_exponent)
-    nav = np.empty((n, 9))
-    bias = np.empty((n, 6))
-    std = np.empty((n, 9))
-    nav_s = np.empty((n, 9)) if cfg.smooth else np.empty((1, 9))
-    nu = np.empty((n, 6))
-    nupd = zupt_filter_kernel(
-        _arr(t), _arr(dth), _arr(dv), _arr(gyro), still, zaru,
-        np.array([initial.lat, initial.lon, initial.height], float),
-        np.array(initial.vel, float), np.array(initial.C, float),
-        np.asarray(bg0, float).copy(), np.zeros(3), P0, q, qdyn, r_zupt, cfg.sigma_zaru**2,
-        float(cfg.gate_zupt), float(cfg.gate_zaru), cfg.update_every,
-        earth.gravity_model_id(cfg.gravity_model), bool(cfg.smooth), nav, bias, std, nav_s, nu)
-    return {"nav": nav, "nav_smoothed": nav_s if cfg.smooth else nav, "bias": bias, "std": std,
-            "innovations": nu, "n_updates": int(nupd)}
+    """Array core of :func:`run_foot_ins`: increments ``dth, dv`` (N,3), rates ``gyro`` (N,3)
+    for the ZARU sample selection, ``still`` flags, detector statistic ``stat`` (NaN: no soft
+    ZUPT), initial state and gyro bias. Returns a dict: ``nav``, ``nav_smoothed`` (N,9
+    :data:`NAV_COLS`), ``bias`` (N,6), ``std`` (N,9), ``innovations`` (N,6: ZUPT e n u, ZARU
+    x y z; NaN where none), ``n_updates`` and ``result`` (the engine's
+    :class:`~insgnss.filter.engine.FilterResult`)."""
+    t = _arr(t)
+    dt = float(np.median(np.diff(t)))
+    fcfg = foot_filter_config(cfg, bg0, dt, float(t[-1] - t[0]))
+    meas = foot_measurements(t, gyro, still, stat, bg0, cfg)
+    model = StrapdownModel.from_increments(t, _arr(dth), _arr(dv), initial, [], fcfg)
+    res = run_engine(model, meas, fcfg)
+    if not res.complete:
+        raise FilterHealthError(f"foot-mounted filter stopped: {res.error}",
+                                found=str(res.error))
+    fwd = res.forward.to_numpy()
+    nav = fwd[:, :9]
+    nav_s = res.smoothed.to_numpy()[:, :9] if res.smoothed is not None else nav
+    inn = res.innovations
+    nu = np.full((t.size, 6), np.nan)
+    ok = inn["accepted"].to_numpy()
+    rows = np.searchsorted(t, inn["time"].to_numpy())
+    for k, name in ((0, "zupt"), (3, "zaru")):
+        sel = ok & (inn["type"].to_numpy() == name)
+        nu[rows[sel], k:k + 3] = inn.loc[sel, ["innov_0", "innov_1", "innov_2"]].to_numpy()
+    return {"nav": nav, "nav_smoothed": nav_s, "bias": res.forward[BIAS_COLS].to_numpy(),
+            "std": res.forward[STD_COLS].to_numpy(), "innovations": nu,
+            "n_updates": int(ok.sum()), "result": res}
 
 
 def run_foot_ins(
@@ -738,4 +409,4 @@ def run_foot_ins(
                                                  "zaru_z"])
     return FootResult(traj, fwd, pd.DataFrame(std, index=idx, columns=STD_COLS),
                       pd.DataFrame(bias, index=idx, columns=BIAS_COLS), stillness, innov,
-                      int(nupd), initial)
+                      int(nupd), initial, out["result"])

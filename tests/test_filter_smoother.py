@@ -96,3 +96,35 @@ def test_outages_forward_within_3_sigma_and_smoother_5x_better():
         print(f"outage {a:.0f}-{b:.0f} s: max horizontal error forward {hf:.2f} m, smoothed {hs:.3f} m")
         assert hf > 1.0, hf  # a real coast
         assert hf >= 5 * hs, (a, hf, hs)
+
+
+def test_engine_smoother_equals_rts_on_its_stored_quantities():
+    """The engine's backward pass (modified Bryson-Frazier form) and the RTS form on the stored
+    P(k|k), P(k|k-1), Phi and feedback give the same smoothed covariances and states, through a
+    GNSS outage: the store holds everything the RTS form (and an EM tuner) needs."""
+    from insgnss.earth import radii
+
+    truth = car_truth(120.0, 50.0)
+    rng = np.random.default_rng(5)
+    model = grade("tactical")
+    imu, _ = corrupt_imu(truth, model, rng)
+    gnss = gnss_from_truth(truth, rng)
+    gnss = gnss[(gnss.index < 50.0) | (gnss.index > 80.0)]
+    init, _ = perturbed_initial(truth, rng, 1.0, 0.1, (0.005, 0.005, 0.02))
+    cfg = FilterConfig(imu_model=model, initial_att_std=(0.005, 0.005, 0.02))
+    res = run_filter(imu, init, [GnssPosition(gnss), GnssVelocity(gnss)], cfg)
+    xs_plus, _, Ps = rts_error_state(res.P_filtered, res.P_predicted, res.Phi, res.feedback)
+    scale = np.sqrt(np.einsum("kii->ki", Ps))
+    d = np.abs(res.P_smoothed - Ps) / (scale[:, :, None] * scale[:, None, :])
+    print(f"largest correlation-scaled difference of the smoothed covariances: {d.max():.2e}")
+    assert d.max() < 1e-7
+    rows = res.smoothed.index.get_indexer(res.epoch_times)
+    f, s = res.forward.iloc[rows], res.smoothed.iloc[rows]
+    M, _ = radii(f["lat"].to_numpy())
+    lat_rts = f["lat"].to_numpy() - xs_plus[:, 1] / (M + f["height"].to_numpy())
+    north = (s["lat"].to_numpy() - lat_rts) * (M + f["height"].to_numpy())
+    vel = s[["vel_e", "vel_n", "vel_u"]].to_numpy() - (f[["vel_e", "vel_n", "vel_u"]].to_numpy()
+                                                       - xs_plus[:, 3:6])
+    print(f"largest smoothed-state difference: north {np.abs(north).max():.2e} m, "
+          f"velocity {np.abs(vel).max():.2e} m/s")
+    assert np.abs(north).max() < 1e-6 and np.abs(vel).max() < 1e-8

@@ -10,19 +10,14 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from insgnss.attitude import euler_to_dcm, skew, wrap_pi
+from insgnss.attitude import euler_to_dcm, euler_to_dcm_nb, wrap_pi
 from insgnss.detect import Stillness
 from insgnss.earth import geodetic_to_enu
 from insgnss.errors import AlignmentError, ConfigError
-from insgnss.foot import (
-    FootConfig,
-    _adjoint_back,
-    _propagate_cov,
-    _update_block,
-    euler_to_dcm_into,
-    level,
-    run_foot_ins,
-)
+from insgnss.filter import gating
+from insgnss.filter.highrate import _first_order_propagation, _kalman_update
+from insgnss.filter.models import StateLayout, error_dynamics
+from insgnss.foot import FootConfig, level, run_foot_ins
 from insgnss.imu import grade
 from insgnss.mechanization.inverse import inverse_mechanize
 from insgnss.simulate.sensors import simulate_imu
@@ -33,56 +28,54 @@ LAT, LON, H = 45.0 * D, 7.0 * D, 200.0
 REPO = Path(__file__).resolve().parents[1]
 
 
-# --- compiled pieces against dense linear algebra ---------------------------------------------
-def _dense_phi(f, C, dt):
-    F = np.zeros((15, 15))
-    F[0:3, 3:6] = np.eye(3)
-    F[3:6, 6:9] = -skew(f)
-    F[3:6, 12:15] = -C
-    F[6:9, 9:12] = -C
-    return np.eye(15) + F * dt
-
-
-def test_covariance_propagation_and_adjoint_match_dense():
+# --- compiled pieces of the engine's high-rate path against dense linear algebra -------------
+def test_first_order_covariance_propagation_matches_dense():
+    """P <- (I + F dt) P (I + F dt)^T + Qd with the strapdown F of a moving, turning IMU."""
     rng = np.random.default_rng(0)
     L = rng.normal(size=(15, 15))
     P = L @ L.T
-    f, C, dt = rng.normal(size=3) * 5, euler_to_dcm(0.3, -0.2, 1.0), 0.01
-    q = np.array([1.0, 2.0, 3.0, 4.0])
-    Phi = _dense_phi(f, C, dt)
-    Q = np.diag(np.r_[np.zeros(3), np.repeat(q, 3)]) * dt
+    C, dt = euler_to_dcm(0.3, -0.2, 1.0), 0.005
+    F = error_dynamics(0.8, 120.0, [3.0, -1.0, 0.2], C, rng.normal(size=3) * 5,
+                       rng.normal(size=3), StateLayout()) * dt
+    Qd = np.diag(rng.uniform(1e-8, 1e-6, 15))
     P2 = P.copy()
-    _propagate_cov(P2, np.empty((15, 15)), f, C, dt, *q)
-    np.testing.assert_allclose(P2, Phi @ P @ Phi.T + Q, rtol=0, atol=1e-12)
-    lam = rng.normal(size=15)
-    lam2 = lam.copy()
-    _adjoint_back(lam2, f, C, dt)
-    np.testing.assert_allclose(lam2, Phi.T @ lam, atol=1e-14)
+    _first_order_propagation(P2, F, Qd, np.empty((15, 15)), np.empty((15, 15)),
+                             np.empty(225, np.int64), np.empty(225, np.int64), np.empty(225))
+    Phi = np.eye(15) + F
+    np.testing.assert_allclose(P2, Phi @ P @ Phi.T + Qd, rtol=0, atol=1e-12)
 
 
-@pytest.mark.parametrize("block,sign", [(3, 1.0), (9, -1.0)])
-def test_block_update_matches_dense_kalman(block, sign):
+@pytest.mark.parametrize("blocks", [[(3, 1.0)], [(9, -1.0)], [(3, 1.0), (9, -1.0)]])
+def test_compiled_update_matches_dense_kalman(blocks):
+    """ZUPT-like (+I at velocity), ZARU-like (-I at the gyro bias) and the two stacked."""
     rng = np.random.default_rng(1)
     L = rng.normal(size=(15, 15))
     P = L @ L.T
-    H = np.zeros((3, 15))
-    H[:, block:block + 3] = sign * np.eye(3)
-    z, r = rng.normal(size=3), 0.1
-    S = H @ P @ H.T + r * np.eye(3)
+    m = 3 * len(blocks)
+    H = np.zeros((m, 15))
+    for k, (b, sign) in enumerate(blocks):
+        H[3 * k:3 * k + 3, b:b + 3] = sign * np.eye(3)
+    H[:, 6:9] += 0.01 * rng.normal(size=(m, 3))  # small attitude terms (ZARU's -C^T [w_ie x])
+    z, R = rng.normal(size=m), 0.1 * np.eye(m)
+    S = H @ P @ H.T + R
     K = P @ H.T @ np.linalg.inv(S)
-    P2, Kt, dx = P.copy(), np.empty((15, 3)), np.empty(15)
-    ok = _update_block(P2, block, sign, z, r, Kt, np.empty((3, 3)), dx, np.empty((3, 3)),
-                       np.empty((3, 15)), np.inf)
-    assert ok
-    np.testing.assert_allclose(Kt, K, atol=1e-12)
-    np.testing.assert_allclose(dx, K @ z, atol=1e-12)
-    np.testing.assert_allclose(P2, P - K @ H @ P, atol=1e-10)
-    # a gate below the normalised innovation rejects the update and leaves P alone
+    P2, x = P.copy(), np.empty(15)
+    Kt, G, s = np.empty((m, 15)), np.empty((m, 15)), np.empty(m)
+    work = [np.empty((m, 15)), np.empty((m, m)), np.empty((m, m)), np.empty((m, 15)),
+            np.empty((m, 15))]
+    assert _kalman_update(P2, H, R, z, m, x, Kt, G, s, *work)
+    np.testing.assert_allclose(Kt.T, K, atol=1e-12)
+    np.testing.assert_allclose(x, K @ z, atol=1e-12)
+    I_KH = np.eye(15) - K @ H
+    np.testing.assert_allclose(P2, I_KH @ P @ I_KH.T + K @ R @ K.T, atol=1e-10)  # Joseph
+    np.testing.assert_allclose(G, np.linalg.solve(S, H), atol=1e-12)
+    np.testing.assert_allclose(s, np.linalg.solve(S, z), atol=1e-12)
+    # a gate below the normalised innovation squared rejects the measurement
     nis = float(z @ np.linalg.solve(S, z))
-    P3 = P.copy()
-    assert not _update_block(P3, block, sign, z, r, Kt, np.empty((3, 3)), dx, np.empty((3, 3)),
-                             np.empty((3, 15)), 0.5 * nis)
-    np.testing.assert_array_equal(P3, P)
+    assert gating.nis(S, z) == pytest.approx(nis, rel=1e-12)
+    streak = np.zeros((1, 3))
+    assert gating.gate_step(streak, 0, 1.0, nis, 2.0 * nis, -1.0) == gating.ACCEPT
+    assert gating.gate_step(streak, 0, 1.0, nis, 0.5 * nis, -1.0) == gating.REJECT
 
 
 def test_levelling_recovers_roll_and_pitch():
@@ -94,7 +87,7 @@ def test_levelling_recovers_roll_and_pitch():
         assert r == pytest.approx(roll, abs=1e-12)
         assert p == pytest.approx(pitch, abs=1e-12)
         C2 = np.empty((3, 3))
-        euler_to_dcm_into(roll, pitch, 1.234, C2)
+        euler_to_dcm_nb(roll, pitch, 1.234, C2)
         np.testing.assert_allclose(C2, C, atol=1e-15)
 
 
@@ -179,9 +172,10 @@ def test_heading_is_unobservable_and_defaults_to_zero(walk):
 
 
 def test_compiled_filter_agrees_with_engine():
-    """The compiled pedestrian filter and the general engine (filterpy, one Python epoch per
-    update) with its ``Zupt`` and ``Zaru`` measurement models, on the same stance samples and
-    matched noise models, give the same walk and the same gyro-bias estimate."""
+    """The foot-mounted INS (the engine's compiled high-rate path, a smoother node at every IMU
+    sample) and the engine's Python update path (filterpy, one Python epoch per update) with
+    the same ``Zupt`` and ``Zaru`` models, on the same stance samples and matched noise
+    models, give the same walk and the same gyro-bias estimate."""
     from insgnss.filter.engine import FilterConfig, run_filter
     from insgnss.filter.measurements import Zaru, Zupt
     from insgnss.imu import ImuErrorModel

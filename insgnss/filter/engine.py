@@ -1,67 +1,85 @@
-"""Closed-loop error-state Kalman filter (INS/GNSS and friends) on filterpy.
+"""The filter engine: one closed-loop error-state Kalman filter for every process model.
 
-Event loop
-----------
-Filter *epochs* are the measurement times (snapped to an IMU sample when within a
-microsecond-scale tolerance) plus a grid every ``epoch_interval`` seconds (so that the
-stored covariances and the smoother have nodes during long outages). Between consecutive
-epochs:
+Structure
+---------
+The engine owns the event loop and everything that does not depend on the process or the
+measurement: the epoch schedule (:mod:`.schedule`), covariance propagation with filterpy's
+``predict``, gating and gate recovery (:mod:`.gating`), health checks (:mod:`.health`), the
+stacked Joseph-form update with filterpy's ``update``, closed-loop feedback and reset, the
+smoother's storage and backward pass (:mod:`.store`, :mod:`.smoother`) and the compiled
+high-rate path (:mod:`.highrate`). It has two plug points:
 
-1. :func:`.kernels.propagate_nominal` (numba) runs the strapdown mechanization
-   (:func:`insgnss.mechanization.strapdown.strapdown_step`) over the IMU samples with the
-   increments compensated by the current bias / scale-factor estimates, stores the nominal
-   trajectory at the IMU rate and integrates the error dynamics F and the noise over
-   covariance sub-intervals of ``propagation_interval`` seconds. An IMU interval that
-   straddles an epoch is split (linear share of its increments).
-2. :func:`.kernels.discretize` (numba) turns each sub-interval into ``Phi, Qd`` (second
-   order or van Loan) and composes them over the segment.
-3. ``filterpy.kalman.predict`` propagates ``x, P`` with the composed ``Phi, Qd`` (exactly
-   the same P as propagating every sub-interval in turn).
-4. Each measurement at the epoch gives ``(z, H, R)``; the innovation passes a chi-square
-   gate (``NIS <= chi2.ppf(p, dof)``) or is rejected and logged; accepted ones are applied
-   with ``filterpy.kalman.update`` (Joseph form ``(I-KH) P (I-KH)^T + K R K^T``).
-5. Closed loop: the error estimate is fed back into the nominal state (position,
-   velocity, attitude, biases, scale factors, extra states) and reset to zero.
+- the *process model* (:class:`.process.ProcessModelBase`: nominal propagation, ``Phi``,
+  ``Qd``, feedback, state layout, the nominal seen by the measurements, output tables):
+  :class:`.strapdown_model.StrapdownModel` (:func:`run_filter`) and
+  :class:`.riss_model.RissModel` (:func:`insgnss.filter.riss_model.run_riss_filter`);
+- the *measurement models* (:mod:`.measurements`: ``(z, H, R)`` at an epoch).
 
-Everything needed by the RTS smoother (:mod:`.smoother`) is stored per epoch.
+Event loop (:func:`run_engine`)
+-------------------------------
+For every epoch ``e`` (:func:`.schedule.build_schedule`):
 
-Health: non-finite ``x``/``P`` or a ``P`` that is not positive definite raises
-:class:`insgnss.errors.FilterHealthError` internally; so does a *runaway NIS*: when, for one
-measurement type, the median normalized innovation ``NIS / dof`` (before gating, so rejected
-measurements count) over the last ``nis_window`` seconds exceeds ``nis_bound`` (at least
-``nis_min_count`` measurements in the window). A consistent filter has a median ``NIS / dof``
-below 1 (about 0.45-0.8 for 1-3 dof); a median beyond 25 means the measurements sit 5 sigma
-away most of the time, i.e. the filter has diverged or its noise model is badly wrong, and its
-solution should not be trusted silently. :func:`run_filter` catches the error and returns what
-was computed up to the last good epoch with ``complete=False``.
+1. *propagate*: if the segment holds high-rate measurements, the compiled path runs it sample
+   by sample (a node per IMU sample, updates at the samples that have high-rate events); then
+   the process model advances the nominal to the epoch and gives ``Phi, Qd``, and
+   ``filterpy.kalman.predict`` propagates ``x, P``;
+2. *update*: each measurement at the epoch gives ``(z, H, R)`` (mapped onto the process
+   model's state); the innovation passes a chi-square gate against the predicted ``P`` or is
+   rejected and logged (gate recovery may inflate ``P``); the accepted ones are applied
+   together with ``filterpy.kalman.update`` (Joseph form ``(I-KH) P (I-KH)^T + K R K^T``;
+   independent noises, so stacking equals sequential updates);
+3. *feedback*: the error estimate is fed back into the nominal and reset to zero;
+4. *store*: the node (``P(e|e-1)``, ``P(e|e)``, ``Phi``, feedback, the update's ``H, K,
+   S^-1 H, S^-1 z`` and the nominal parameters) goes to the smoother's store.
+
+After the loop the smoother runs backwards over the nodes and the process model assembles the
+IMU-rate forward and smoothed tables.
+
+Health: non-finite ``x``/``P``/nominal, a ``P`` that is not positive definite and a runaway NIS
+(:mod:`.health`) raise :class:`insgnss.errors.FilterHealthError` internally; the engine catches
+it and returns what was computed up to the last good node with ``complete=False``.
 """
 
 from __future__ import annotations
 
 import time as _time
-from collections import deque
 from dataclasses import dataclass, field
 
 import numpy as np
 import pandas as pd
-from filterpy.kalman import predict as kf_predict
-from filterpy.kalman import update as kf_update
-from scipy.stats import chi2
 
-from .. import earth
-from ..errors import ConfigError, FilterHealthError, InvalidValueError
-from ..imu import ImuErrorModel, coning_sculling, grade, increments
-from ..mechanization.strapdown import NavState, attitude_update_id
-from . import kernels
-from .measurements import Measurement, NominalState
-from .models import BIAS_MODELS, StateLayout, process_model
-from .smoother import STD_COLS, assemble_table, output_columns, smooth
+from ..errors import ConfigError, FilterHealthError
+from ..imu import ImuErrorModel
+from ..mechanization.strapdown import NavState
+from . import gating, health, highrate
+from .gating import GateTable
+from .health import RunawayNis, check_covariance
+from .measurements import Measurement
+from .models import BIAS_MODELS, StateLayout
+from .process import ProcessModelBase
+from .schedule import build_schedule
+from .smoother import smooth
+from .store import InnovationLog, NodeStore, innovation_tables
+from .strapdown_model import DISCRETIZATIONS, STD_COLS, StrapdownModel, levelling_covariance
 
-__all__ = ["BIAS_COLS", "STD_COLS", "FilterConfig", "FilterResult", "run_filter"]
+__all__ = ["BIAS_COLS", "STD_COLS", "FilterConfig", "FilterResult", "run_filter", "run_engine",
+           "levelling_covariance"]
 
 BIAS_COLS = ["gyro_bias_x", "gyro_bias_y", "gyro_bias_z",
              "accel_bias_x", "accel_bias_y", "accel_bias_z"]
-DISCRETIZATIONS = {"second_order": kernels.DISC_SECOND_ORDER, "vanloan": kernels.DISC_VANLOAN}
+
+
+def _filterpy():
+    """filterpy's ``predict`` and ``update``, imported on first use.
+
+    ``filterpy.kalman`` costs about 0.6-1 s to import, almost all of it ``scipy.stats``, which
+    ``filterpy/kalman/kalman_filter.py`` itself imports (through ``filterpy.stats``, for the
+    log-likelihood); loading that file alone therefore saves nothing, so the import is deferred
+    to the first filter run instead.
+    """
+    from filterpy.kalman import predict, update
+
+    return predict, update
 
 
 @dataclass
@@ -125,6 +143,14 @@ class FilterConfig:
         (:func:`insgnss.policies.gap_noise`): indexed by time [s] with columns ``pos_std``
         [m], ``vel_std`` [m/s], ``att_std`` [rad] (the same on every axis); each row's variances
         are added to ``Qd`` of the propagation segment that contains its time.
+    accel_dynamic_noise, gyro_dynamic_noise : float
+        Dynamics-dependent process noise [fraction]: a white error of this fraction of each
+        IMU interval's dynamic velocity increment ``|C dv - g dt|`` and angle increment
+        ``|dtheta|`` (unmodelled scale-factor, g-sensitivity and vibration errors; used by the
+        foot-mounted profile). 0: none.
+    smoother_covariance : bool
+        Run the smoother's covariance recursion (smoothed ``*_std`` columns and
+        ``P_smoothed``); without it the smoothed table has NaN stds (cheaper at high rate).
     """
 
     imu_model: ImuErrorModel | str = "tactical"
@@ -156,6 +182,9 @@ class FilterConfig:
     nis_bound: float = 25.0
     nis_min_count: int = 10
     extra_noise: pd.DataFrame | None = None
+    accel_dynamic_noise: float = 0.0
+    gyro_dynamic_noise: float = 0.0
+    smoother_covariance: bool = True
 
     def validate(self) -> None:
         if self.bias_model not in BIAS_MODELS:
@@ -175,6 +204,10 @@ class FilterConfig:
         if not (self.nis_bound > 0):
             raise ConfigError("NIS bound must be positive", column="nis_bound",
                               found=self.nis_bound)
+        for key in ("accel_dynamic_noise", "gyro_dynamic_noise"):
+            v = getattr(self, key)
+            if not (np.isfinite(v) and v >= 0):
+                raise ConfigError("must be a finite non-negative number", column=key, found=v)
         for p in [self.gate_probability, *self.gate_probabilities.values()]:
             if p is not None and not (0.0 <= p < 1.0):
                 raise ConfigError("gating probability must be in [0, 1)", column="gate_probability",
@@ -191,7 +224,7 @@ class FilterResult:
         IMU-rate forward (causal) solution: ``NAV_COLS``, ``STD_COLS`` and every parameter
         state (``gyro_bias_x .. accel_bias_z``, scale factors, extras) with a ``_std`` column.
     smoothed : DataFrame or None
-        The same columns from the RTS smoother.
+        The same columns from the smoother (:mod:`.smoother`).
     innovations : DataFrame
         One row per measurement evaluated: ``time type dof nis threshold accepted recovered`` and
         ``innov_k``, ``innov_std_k`` for each component.
@@ -205,13 +238,22 @@ class FilterResult:
         ``output`` and ``total``.
     layout : StateLayout
     epoch_times : (E,) array
+        Times of the smoother nodes (:mod:`.store`): the filter epochs and, in segments run by
+        the compiled high-rate path, every IMU sample.
     P_filtered, P_predicted : (E, n, n) arrays
-        ``P(e|e)`` and ``P(e|e-1)`` at the filter epochs.
+        ``P(e|e)`` and ``P(e|e-1)`` at the nodes.
+    Phi : (E, n, n) array
+        Error transition from node ``e-1`` to ``e``.
     feedback : (E, n) array
-        Error estimate removed from the nominal at each epoch.
+        Error estimate removed from the nominal at each node.
     P_smoothed : (E, n, n) array or None
     final : NavState
         Nominal state at the last processed epoch.
+    params : (E, p) array
+        Nominal parameter values at each node (process-model specific).
+    updates : dict
+        The applied updates per node (``ptr``, ``H``, ``K``, ``G = S^-1 H``, ``s = S^-1 z``;
+        :class:`insgnss.filter.store.NodeStore`).
     """
 
     forward: pd.DataFrame
@@ -229,149 +271,251 @@ class FilterResult:
     error: Exception | None = None
     final: NavState | None = None
     params: np.ndarray | None = field(default=None, repr=False)
+    Phi: np.ndarray | None = field(default=None, repr=False)
+    updates: dict | None = field(default=None, repr=False)
 
 
-class _Store:
-    """Per-run arrays shared by the engine, the smoother and the output assembly."""
+class _Run:
+    """State of one engine run shared by the loop's steps."""
 
-    def __init__(self, n_t, n_ep, n, n_cols):
-        # the forward table itself: the kernel writes the nominal into columns 0-8, the
-        # output assembly the stds and parameters (no second copy of the trajectory)
-        self.nav = np.empty((n_t, n_cols))
-        self.seg = np.zeros(n_t, np.int64)
-        self.post = np.zeros(n_t, np.bool_)
-        self.Pf = np.empty((n_ep, n, n))
-        self.Pp = np.empty((n_ep, n, n))
-        self.Phi = np.empty((n_ep, n, n))
-        self.fb = np.zeros((n_ep, n))
-        self.pnom = np.empty((n_ep, n - 9))
-
-
-def _epoch_schedule(t, measurements, epoch_interval, tol):
-    """Epoch times and, per epoch, the (measurement index, row) events in order."""
-    t0, t1 = t[0], t[-1]
-    times, mi, ri = [], [], []
-    for k, m in enumerate(measurements):
-        tm = np.asarray(m.times, float)
-        rows = np.nonzero((tm >= t0 - tol) & (tm <= t1 + tol))[0]
-        tm = np.clip(tm[rows], t0, t1)
-        # snap to IMU samples
-        j = np.clip(np.searchsorted(t, tm), 1, t.size - 1)
-        near = np.where(np.abs(t[j] - tm) < np.abs(t[j - 1] - tm), j, j - 1)
-        tm = np.where(np.abs(t[near] - tm) <= tol, t[near], tm)
-        times.append(tm)
-        mi.append(np.full(rows.size, k))
-        ri.append(rows)
-    n_grid = int(np.floor((t1 - t0) / epoch_interval + 1e-9))
-    grid = t0 + epoch_interval * np.arange(n_grid + 1)
-    grid = np.append(grid, t1)
-    j = np.clip(np.searchsorted(t, grid), 1, t.size - 1)
-    near = np.where(np.abs(t[j] - grid) < np.abs(t[j - 1] - grid), j, j - 1)
-    grid = np.where(np.abs(t[near] - grid) <= tol, t[near], grid)
-    ev_t = np.concatenate(times) if times else np.empty(0)
-    ev_m = np.concatenate(mi).astype(np.int64) if mi else np.empty(0, np.int64)
-    ev_r = np.concatenate(ri).astype(np.int64) if ri else np.empty(0, np.int64)
-    ep = np.unique(np.concatenate([grid, ev_t]))
-    # merge epochs closer than the tolerance
-    keep = np.concatenate([[True], np.diff(ep) > tol])
-    ep = ep[keep]
-    ev_e = np.clip(np.searchsorted(ep, ev_t - tol), 0, ep.size - 1)
-    order = np.lexsort((ev_r, ev_m, ev_e))
-    ev_e, ev_m, ev_r = ev_e[order], ev_m[order], ev_r[order]
-    ptr = np.searchsorted(ev_e, np.arange(ep.size + 1))
-    return ep, ev_m, ev_r, ptr
+    def __init__(self, model: ProcessModelBase, measurements: list, config: FilterConfig):
+        self.model = model
+        self.config = config
+        self.general = [m for m in measurements if not getattr(m, "high_rate", False)]
+        self.fast = [m for m in measurements if getattr(m, "high_rate", False)]
+        names = []
+        for m in self.general + self.fast:
+            if m.name not in names:
+                names.append(m.name)
+        self.tid = {name: i for i, name in enumerate(names)}
+        self.gates = GateTable(config.gate_probability, config.gate_probabilities)
+        self.recovery = -1.0 if config.gate_recovery is None else float(config.gate_recovery)
+        self.streak = np.zeros((max(len(names), 1), 3))
+        self.log = InnovationLog(names)
+        self.check = bool(config.check_health)
+        self.timing = {"updates": 0.0}
+        t = model.t
+        tol = min(config.snap_tolerance, 1e-3 * float(np.median(np.diff(t))))
+        self.sched = build_schedule(t, [m.times for m in self.general], config.epoch_interval,
+                                    tol, model.split, [m.times for m in self.fast])
+        self.runaway = RunawayNis(len(names), config.nis_window if self.check else None,
+                                  config.nis_bound, config.nis_min_count,
+                                  _window_capacity(self, config.nis_window))
+        n = model.layout.n
+        self.store = NodeStore(self.sched.n_epochs + self.sched.dense_samples, n, model.n_par)
+        self.hr = highrate.HighRate(self.fast, model, self) if self.fast else None
+        if config.extra_noise is not None and len(config.extra_noise):
+            self.xn_t = np.asarray(config.extra_noise.index, float)
+            self.xn_var = config.extra_noise[["pos_std", "vel_std", "att_std"]].to_numpy(float) ** 2
+        else:
+            self.xn_t, self.xn_var = np.empty(0), np.empty((0, 3))
+        self.xn_i = int(np.searchsorted(self.xn_t, self.sched.epochs[0], side="right"))
+        self.I = np.eye(n)
 
 
-def innovation_tables(log: list, recoveries: list) -> tuple[pd.DataFrame, pd.DataFrame]:
-    """Innovation log and rejected rows from the per-measurement records
-    ``(time, type, dof, nis, threshold, accepted, innovation, S)`` (shared with the RISS
-    filter, so both produce the same columns)."""
-    ncomp = max((r[2] for r in log), default=0)
-    cols = {"time": [r[0] for r in log], "type": [r[1] for r in log],
-            "dof": [r[2] for r in log], "nis": [r[3] for r in log],
-            "threshold": [r[4] for r in log], "accepted": [bool(r[5]) for r in log]}
-    rec = set(recoveries)
-    cols["recovered"] = [(r[0], r[1]) in rec for r in log]
-    for k in range(ncomp):
-        cols[f"innov_{k}"] = [r[6][k] if r[2] > k else np.nan for r in log]
-    for k in range(ncomp):
-        cols[f"innov_std_{k}"] = [np.sqrt(r[7][k, k]) if r[2] > k and r[7][k, k] >= 0 else np.nan
-                                   for r in log]
-    innovations = pd.DataFrame(cols)
-    rejected = innovations[~innovations["accepted"]].reset_index(drop=True)
-    return innovations, rejected
+def _window_capacity(run: _Run, window) -> int:
+    """Most measurements of one type inside any runaway-NIS window (buffer size)."""
+    if window is None:
+        return 2
+    cap = 2
+    per: dict = {}
+    for m in run.general + run.fast:
+        per.setdefault(run.tid[m.name], []).append(np.asarray(m.times, float))
+    for arrs in per.values():
+        tm = np.sort(np.concatenate(arrs))
+        if tm.size:
+            cap = max(cap, int(np.max(np.searchsorted(tm, tm + window, side="right")
+                                      - np.arange(tm.size))) + 1)
+    return cap
 
 
-def levelling_covariance(P, C, att: slice, accel_bias: slice, g: float) -> np.ndarray:
-    """``P`` with the tilt / horizontal accelerometer-bias correlation of a levelled start.
+def _propagate(run: _Run, e: int, node: int, x, P):
+    """Step 1: advance the nominal and the covariance from the previous node to epoch ``e``."""
+    model, te = run.model, run.sched.epochs[e]
+    if run.hr is not None and run.sched.dense[e]:
+        node, P = run.hr.segment(te, node, P)
+    Phi, Qd = model.propagate(te, node)
+    if run.xn_i < run.xn_t.size and run.xn_t[run.xn_i] <= te:
+        Qd = Qd.copy()
+        while run.xn_i < run.xn_t.size and run.xn_t[run.xn_i] <= te:
+            for blk, sl in enumerate(model.noise_blocks):  # position, velocity, attitude
+                i3 = np.arange(sl.start, sl.stop)
+                Qd[i3, i3] += run.xn_var[run.xn_i, blk]
+            run.xn_i += 1
+    c0 = _time.perf_counter()
+    kf_predict, _ = _filterpy()
+    x, P = kf_predict(x, P, Phi, Qd)
+    P = 0.5 * (P + P.T)
+    if run.check:
+        if not model.nominal_finite():
+            raise health.nominal_error(te)
+        # full check (Cholesky) here only if no update follows at this epoch
+        ptr = run.sched.ptr
+        check_covariance(x, P, te, "prediction", full=ptr[e + 1] == ptr[e])
+    model.timing["covariance"] += _time.perf_counter() - c0
+    return node, x, P, Phi
 
-    Levelling sets ``C`` so that ``C^T (0, 0, g) = f_mean``; with an accelerometer bias error
-    ``db`` (nominal minus true) the misalignment is ``phi x g^l = C db``, i.e. ``phi = J db`` with
-    ``J = [[0, -1, 0], [1, 0, 0], [0, 0, 0]] C / g``. Adds ``J P_b J^T`` to the attitude block
-    and ``J P_b`` as the cross-covariance (errors "nominal minus true", ``C = (I + [phi x])
-    C_true``).
+
+def _as_arrays(z, H, R):
+    if not (isinstance(z, np.ndarray) and z.ndim == 1):
+        z = np.atleast_1d(np.asarray(z, dtype=float))
+    if not (isinstance(R, np.ndarray) and R.ndim == 2):
+        R = np.atleast_2d(np.asarray(R, dtype=float))
+    if not (isinstance(H, np.ndarray) and H.ndim == 2):
+        H = np.atleast_2d(np.asarray(H, dtype=float))
+    return z, H, R
+
+
+def _gate(run: _Run, m, time: float, z, H, R, P):
+    """Gate one measurement against the predicted ``P``: ``(accepted, P, S, nis)``; a gate
+    recovery returns the inflated ``P``."""
+    S = H @ P @ H.T + R
+    nis = gating.nis(S, z)
+    tid = run.tid[m.name]
+    run.runaway.push(tid, m.name, time, nis / z.size)
+    thr = run.gates.threshold(run.gates.probability(m), z.size)
+    code = gating.gate_step(run.streak, tid, time, nis, thr, run.recovery)
+    if code == gating.RECOVER:
+        P = P.copy()
+        S = gating.inflate_for(P, H, R, z, thr, run.model.n_nav)
+        nis = gating.nis(S, z)
+    run.log.add(time, tid, nis, thr, code != gating.REJECT, code == gating.RECOVER, z, S)
+    return code != gating.REJECT, code == gating.RECOVER, P
+
+
+def _update(run: _Run, e: int, x, P):
+    """Step 2: evaluate, gate and apply the measurements of epoch ``e`` (one stacked
+    filterpy update). Returns ``(x, P, P_predicted_seen)``."""
+    sched, model = run.sched, run.model
+    zs, Hs, Rs = [], [], []
+    Pp = P
+    for k in range(sched.ptr[e], sched.ptr[e + 1]):
+        m = run.general[sched.ev_m[k]]
+        time = sched.ev_t[k]
+        res = m.evaluate(int(sched.ev_r[k]), model.nominal(time))
+        if res is None:
+            continue
+        res = model.observe(m, *_as_arrays(*res))
+        if res is None:
+            continue
+        z, H, R = res
+        ok, recovered, P = _gate(run, m, time, z, H, R, P)
+        if recovered:
+            Pp = P  # the gate recovery inflated P(e|e-1): the smoother needs it
+        if ok:
+            zs.append(z)
+            Hs.append(H)
+            Rs.append(R)
+    if not zs:
+        return x, P, Pp
+    if len(zs) == 1:
+        z, H, R = zs[0], Hs[0], Rs[0]
+    else:
+        z, H = np.concatenate(zs), np.vstack(Hs)
+        R = np.zeros((z.size, z.size))
+        i0 = 0
+        for Rk in Rs:
+            i1 = i0 + Rk.shape[0]
+            R[i0:i1, i0:i1] = Rk
+            i0 = i1
+    _, kf_update = _filterpy()
+    x, P = kf_update(x, P, z, R, H)
+    P = 0.5 * (P + P.T)
+    if run.check:
+        check_covariance(x, P, sched.epochs[e], "update")
+    # the smoother's record of the update: H, K = Pp H^T S^-1, S^-1 H, S^-1 z
+    S = H @ Pp @ H.T + R
+    G = np.linalg.solve(S, H)
+    run.store.add_update(H, Pp @ G.T, G, np.linalg.solve(S, z))
+    return x, P, Pp
+
+
+def run_engine(model: ProcessModelBase, measurements: list[Measurement], config: FilterConfig,
+               progress: bool = False) -> FilterResult:
+    """Run the engine (module docstring) with a prepared process model.
+
+    Parameters
+    ----------
+    model : ProcessModelBase
+        Process model at the initial state (e.g. :class:`.strapdown_model.StrapdownModel`).
+    measurements : list of Measurement
+        Measurement models; those with ``high_rate=True`` run on the compiled path.
+    config : FilterConfig
+        Gating, recovery, health, epoch and smoother settings (the process settings were used
+        to build ``model``).
+    progress : bool
+        Show a progress bar (tqdm) over the epochs.
     """
-    P = P.copy()
-    J = np.array([[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 0.0]]) @ C / g
-    Pb = P[accel_bias, accel_bias]
-    cross = J @ Pb
-    P[att, att] += cross @ J.T
-    P[att, accel_bias] = cross
-    P[accel_bias, att] = cross.T
-    return P
+    t_start = _time.perf_counter()
+    run = _Run(model, list(measurements), config)
+    sched, store = run.sched, run.store
+    model.prepare(sched.epochs)
+    n = model.layout.n
+    x = np.zeros(n)
+    P = model.initial_covariance()
+    perf = _time.perf_counter
+    node, completed, error = 0, -1, None
+    iterator = range(sched.n_epochs)
+    if progress:
+        from tqdm import tqdm
 
-
-def _inflate_for(P, H, R, z, thr):
-    """P with its navigation blocks (states 0-8) scaled so that ``z`` has NIS ~ thr / 2."""
-    P = P.copy()
-    nav = slice(0, 9)
-    Hn = H[:, nav]
-    for _ in range(60):
-        S = H @ P @ H.T + R
-        if kernels.nis(S, z) <= 0.5 * thr or not np.any(Hn):
-            break
-        P[nav, :] *= 2.0 ** 0.5
-        P[:, nav] *= 2.0 ** 0.5
-    return P
-
-
-def _check(x, P, time, what, full=True):
-    """Raise FilterHealthError if x or P is non-finite or (``full``) P is not positive definite."""
-    if not np.isfinite(x.sum() + P.sum()):
-        raise FilterHealthError(f"filter state became non-finite at t = {time:.6f} s ({what})",
-                                found="NaN/inf in x or P")
-    if not full:
-        return
+        iterator = tqdm(iterator, total=sched.n_epochs, unit="epoch", desc="filter")
     try:
-        np.linalg.cholesky(P)
-    except np.linalg.LinAlgError:
-        raise FilterHealthError(
-            f"covariance is not positive definite at t = {time:.6f} s ({what})",
-            found="Cholesky factorisation failed") from None
+        for e in iterator:
+            te = sched.epochs[e]
+            Phi = run.I
+            if e > 0:
+                node, x, P, Phi = _propagate(run, e, node, x, P)
+            c0 = perf()
+            fb = None
+            x, P, Pp = _update(run, e, x, P) if sched.ptr[e + 1] > sched.ptr[e] else (x, P, P)
+            if store.ptr[node] < store.n_rows:  # an update was applied: feed back and reset
+                fb = x
+                model.feedback(x)
+                x = np.zeros(n)
+            store.close(node, te, Phi, Pp, P, fb, model.params())
+            model.close_epoch(node, te)
+            run.timing["updates"] += perf() - c0
+            completed, node = e, node + 1
+    except FilterHealthError as exc:
+        error = exc
+    return _finish(run, completed, error, t_start)
 
 
-def _runaway_nis(hist: dict, name: str, time: float, nnis: float, config: FilterConfig) -> None:
-    """Record one normalized NIS and raise FilterHealthError when its window median runs away."""
-    rec = hist.get(name)
-    if rec is None:
-        rec = hist[name] = [deque(), -np.inf]
-    q = rec[0]
-    q.append((time, nnis if np.isfinite(nnis) else np.inf))
-    while q and q[0][0] < time - config.nis_window:
-        q.popleft()
-    # the median is taken at most once per second per type (a 10 Hz NHC keeps ~300 values)
-    if len(q) < config.nis_min_count or time - rec[1] < 1.0:
-        return
-    rec[1] = time
-    vals = sorted(v for _, v in q)  # exact median; sorted() beats np.median on ~30 values
-    k = len(vals) // 2
-    med = vals[k] if len(vals) % 2 else 0.5 * (vals[k - 1] + vals[k])
-    if med > config.nis_bound:
-        raise FilterHealthError(
-            f"runaway NIS at t = {time:.6f} s: the median NIS/dof of the {name!r} measurements over "
-            f"the last {config.nis_window:g} s is {med:.4g} (filter diverged or measurement noise "
-            "far too small)", column=name, expected=f"a median NIS/dof <= {config.nis_bound:g}",
-            found=f"{med:.4g} over {len(q)} measurements")
+def _finish(run: _Run, completed: int, error, t_start: float) -> FilterResult:
+    """Smoother and output tables over the completed nodes."""
+    model, store, config = run.model, run.store, run.config
+    perf = _time.perf_counter
+    n_ok = store.count
+    t_last = store.t[n_ok - 1] if n_ok else model.t[0]
+    n_rows = model.rows_done(t_last) if n_ok else 0
+    timing = {"mechanization": model.timing["mechanization"],
+              "covariance": model.timing["covariance"], "updates": run.timing["updates"]}
+    if "high_rate" in run.timing:
+        timing["high_rate"] = run.timing["high_rate"]
+    c0 = perf()
+    forward = model.output(store, n_ok, n_rows)
+    timing["output"] = perf() - c0
+    smoothed, Ps = None, None
+    timing["smoother"] = 0.0
+    if config.smoother and n_ok >= 2:
+        c0 = perf()
+        xs = smooth(store, n_ok, config.smoother_covariance)
+        Ps = xs[2]
+        smoothed = model.output(store, n_ok, n_rows, xs)
+        timing["smoother"] = perf() - c0
+    innovations, rejected = innovation_tables(run.log)
+    timing["total"] = perf() - t_start
+    k = store.ptr[n_ok]
+    updates = {"ptr": store.ptr[:n_ok + 1], "H": store.H[:k], "K": store.K[:k],
+               "G": store.G[:k], "s": store.s[:k]}
+    return FilterResult(
+        forward=forward, smoothed=smoothed, innovations=innovations, rejected=rejected,
+        complete=error is None, timing=timing, layout=model.layout,
+        epoch_times=store.t[:n_ok].copy(), P_filtered=store.Pf[:n_ok],
+        P_predicted=store.Pp[:n_ok], feedback=store.fb[:n_ok], P_smoothed=Ps, error=error,
+        final=model.final_state(float(t_last)), params=store.par[:n_ok], Phi=store.Phi[:n_ok],
+        updates=updates)
 
 
 def run_filter(
@@ -381,7 +525,8 @@ def run_filter(
     config: FilterConfig | None = None,
     progress: bool = False,
 ) -> FilterResult:
-    """Run the closed-loop error-state filter (and the RTS smoother) over an IMU table.
+    """Run the closed-loop error-state filter (and the smoother) over an IMU table with the
+    LLF strapdown process model.
 
     Parameters
     ----------
@@ -391,7 +536,8 @@ def run_filter(
     initial : NavState
         Initial nominal state (e.g. from alignment) at the first IMU time.
     measurements : list of Measurement
-        Aiding measurement models (:mod:`insgnss.filter.measurements`).
+        Aiding measurement models (:mod:`insgnss.filter.measurements`); those built with
+        ``high_rate=True`` (ZUPT, ZARU, body velocity) run on the compiled high-rate path.
     config : FilterConfig
     progress : bool
         Show a progress bar (tqdm) over the filter epochs.
@@ -400,254 +546,11 @@ def run_filter(
     -------
     FilterResult
     """
-    t_start_total = _time.perf_counter()
     config = FilterConfig() if config is None else config
     config.validate()
     measurements = list(measurements)
-    imu_model = grade(config.imu_model) if isinstance(config.imu_model, str) else config.imu_model
-
-    t, dth, dv = increments(imu)
-    if t.size < 2:
-        raise InvalidValueError("IMU table needs at least two samples", found=t.size)
-    if not np.all(np.diff(t) > 0):
-        raise InvalidValueError("IMU times must be strictly increasing")
-    if config.coning:
-        dth, dv = coning_sculling(dth, dv)
-    dth = np.ascontiguousarray(dth, dtype=float)
-    dv = np.ascontiguousarray(dv, dtype=float)
-
     extras = []
     for m in measurements:
         extras.extend(m.extra_states())
-    layout = StateLayout(config.scale_factors, extras)
-    pm = process_model(
-        layout, imu_model, config.bias_model, config.initial_pos_std, config.initial_vel_std,
-        config.initial_att_std, config.initial_gyro_bias_std, config.initial_accel_bias_std,
-        config.initial_gyro_scale_std, config.initial_accel_scale_std, config.gyro_bias,
-        config.accel_bias)
-    n = layout.n
-    i_sg, i_sa = layout.index("gyro_scale"), layout.index("accel_scale")
-
-    tol = min(config.snap_tolerance, 1e-3 * float(np.median(np.diff(t))))
-    ep_t, ev_m, ev_r, ptr = _epoch_schedule(t, measurements, config.epoch_interval, tol)
-    n_ep = ep_t.size
-    st = _Store(t.size, n_ep, n, len(output_columns(layout)))
-    max_gap = float(np.max(np.diff(ep_t))) if n_ep > 1 else 0.0
-    max_sub = min(int(np.ceil(max_gap / config.propagation_interval)),
-                  int(np.ceil(max_gap / np.min(np.diff(t))))) + 3
-    Fint = np.zeros((max_sub, n, n))
-    Qint = np.zeros((max_sub, 2, 3, 3))
-    sub_dt = np.zeros(max_sub)
-    Phi = np.eye(n)
-    Qd = np.zeros((n, n))
-    rates = np.zeros((4, 3))
-    method = DISCRETIZATIONS[config.discretization]
-    gmodel = earth.gravity_model_id(config.gravity_model)
-    aupd = attitude_update_id(config.attitude_update)
-
-    pos = np.array([initial.lat, initial.lon, initial.height], float)
-    vel = np.array(initial.vel, float).copy()
-    C = np.ascontiguousarray(initial.C, dtype=float).copy()
-    pnom = pm.initial_values.copy()
-    x = np.zeros(n)
-    P = np.diag(pm.p0**2)
-    if config.levelling_correlation:
-        P = levelling_covariance(P, C, layout["att"], layout["accel_bias"],
-                                 earth.normal_gravity(initial.lat, initial.height,
-                                                      config.gravity_model))
-    par_decay = pm.decay[9:].copy()
-    has_decay = bool(np.any(par_decay > 0))
-    I_n = np.eye(n)
-    if config.extra_noise is not None and len(config.extra_noise):
-        xn_t = np.asarray(config.extra_noise.index, float)
-        xn_var = config.extra_noise[["pos_std", "vel_std", "att_std"]].to_numpy(float) ** 2
-    else:
-        xn_t, xn_var = np.empty(0), np.empty((0, 3))
-    xn_i = int(np.searchsorted(xn_t, ep_t[0], side="right"))
-
-    nav = NominalState()
-    nav.layout = layout
-    nav.gyro_psd = pm.gyro_psd
-    gate_cache: dict = {}
-    log = []  # (time, type, dof, nis, threshold, accepted, y, s)
-    streak: dict = {}  # measurement type -> [first, last rejection time, count] of its streak
-    nis_hist: dict = {}  # measurement type -> deque of (time, NIS / dof) for the runaway check
-    nis_check = config.check_health and config.nis_window is not None
-    recoveries: list = []
-
-    timing = {"mechanization": 0.0, "covariance": 0.0, "updates": 0.0}
-    j, frac = 1, 0.0
-    kernels.store_nav(st.nav, 0, pos, vel, C)
-    st.seg[0], st.post[0] = 0, True
-    completed = -1
-    error = None
-    iterator = range(n_ep)
-    if progress:
-        from tqdm import tqdm
-
-        iterator = tqdm(iterator, total=n_ep, unit="epoch", desc="filter")
-    perf = _time.perf_counter
-    try:
-        for e in iterator:
-            te = ep_t[e]
-            if e > 0:
-                c0 = perf()
-                j, frac, n_sub = kernels.propagate_nominal(
-                    t, dth, dv, j, frac, te, pos, vel, C, pnom, i_sg, i_sa, gmodel, aupd,
-                    config.propagation_interval, Fint, Qint, sub_dt, pm.gyro_psd, pm.accel_psd,
-                    st.nav, st.seg, e, rates)
-                seg_dur = te - ep_t[e - 1]
-                if has_decay:
-                    # the nominal of a Gauss-Markov parameter follows its mean, b' = -b / tau
-                    pnom *= np.exp(-par_decay * seg_dur)
-                c1 = perf()
-                kernels.discretize(Fint, Qint, sub_dt, n_sub, pm.decay, pm.qdiag, method, Phi, Qd)
-                if xn_i < xn_t.size and xn_t[xn_i] <= te:
-                    Qd = Qd.copy()
-                    while xn_i < xn_t.size and xn_t[xn_i] <= te:
-                        for blk in range(3):  # position, velocity, attitude
-                            i3 = np.arange(3 * blk, 3 * blk + 3)
-                            Qd[i3, i3] += xn_var[xn_i, blk]
-                        xn_i += 1
-                x, P = kf_predict(x, P, Phi, Qd)
-                if config.check_health:
-                    if not np.isfinite(pos.sum() + vel.sum() + C.sum()):
-                        raise FilterHealthError(
-                            f"nominal state became non-finite at t = {te:.6f} s (mechanization; "
-                            "non-finite IMU data?)", found="NaN/inf in position/velocity/attitude")
-                    # full check (Cholesky) here only if no update follows at this epoch
-                    _check(x, P, te, "prediction", full=ptr[e + 1] == ptr[e])
-                c2 = perf()
-                timing["mechanization"] += c1 - c0
-                timing["covariance"] += c2 - c1
-                st.Phi[e] = Phi
-            else:
-                st.Phi[e] = I_n
-                seg_dur = 0.0
-            st.Pp[e] = P
-            c0 = perf()
-            k0, k1 = ptr[e], ptr[e + 1]
-            if k1 > k0:
-                nav.time = te
-                nav.lat, nav.lon, nav.height = pos[0], pos[1], pos[2]
-                nav.vel, nav.C = vel, C
-                nav.omega_ib, nav.omega_ib_mean = rates[0], rates[1]
-                nav.f_ib, nav.f_ib_mean = rates[2], rates[3]
-                nav.segment_duration = seg_dur
-                nav.params = pnom
-                nav.M, nav.N = earth.radii(pos[0])
-                zs, Hs, Rs = [], [], []
-                for k in range(k0, k1):
-                    m = measurements[ev_m[k]]
-                    res = m.evaluate(int(ev_r[k]), nav)
-                    if res is None:
-                        continue
-                    z, H, R = res
-                    if not (isinstance(z, np.ndarray) and z.ndim == 1):
-                        z = np.atleast_1d(np.asarray(z, dtype=float))
-                    if not (isinstance(R, np.ndarray) and R.ndim == 2):
-                        R = np.atleast_2d(np.asarray(R, dtype=float))
-                    dof = z.size
-                    # x is zero here (reset after the previous epoch), so y = z; every
-                    # measurement of the epoch is gated against the predicted P
-                    S = H @ P @ H.T + R
-                    nis = kernels.nis(S, z)
-                    if nis_check:
-                        _runaway_nis(nis_hist, m.name, te, nis / dof, config)
-                    p_gate = m.gate_probability
-                    if p_gate is None:
-                        p_gate = config.gate_probabilities.get(m.name, config.gate_probability)
-                    if p_gate:
-                        key = (p_gate, dof)
-                        thr = gate_cache.get(key)
-                        if thr is None:
-                            thr = gate_cache[key] = float(chi2.ppf(p_gate, dof))
-                    else:
-                        thr = np.inf
-                    ok = nis <= thr  # False for NaN
-                    recovered = False
-                    if ok:
-                        streak.pop(m.name, None)
-                    elif np.isfinite(nis):
-                        # a streak is an unbroken run of rejections of one type: a gap longer
-                        # than the recovery time without any (e.g. between two stops for ZUPT)
-                        # starts a new one, so sparse measurements are not force-applied
-                        rec = streak.get(m.name)
-                        if rec is None or (config.gate_recovery is not None
-                                           and te - rec[1] > config.gate_recovery):
-                            rec = streak[m.name] = [te, te, 0]
-                        rec[1] = te
-                        rec[2] += 1
-                        t_first = rec[0]
-                        if config.gate_recovery is not None and rec[2] >= 3 and \
-                                te - t_first > config.gate_recovery:
-                            P = _inflate_for(P, H, R, z, thr)
-                            S = H @ P @ H.T + R
-                            nis = kernels.nis(S, z)
-                            ok = recovered = True
-                            streak.pop(m.name, None)
-                    log.append((te, m.name, dof, nis, thr, ok, z, S))
-                    if recovered:
-                        recoveries.append((te, m.name))
-                    if ok:
-                        zs.append(z)
-                        Hs.append(H)
-                        Rs.append(R)
-                if zs:
-                    # one filterpy (Joseph-form) update with the accepted measurements stacked;
-                    # their noises are independent, so this equals sequential updates
-                    if len(zs) == 1:
-                        z, H, R = zs[0], Hs[0], Rs[0]
-                    else:
-                        z, H = np.concatenate(zs), np.vstack(Hs)
-                        R = np.zeros((z.size, z.size))
-                        i0 = 0
-                        for Rk in Rs:
-                            i1 = i0 + Rk.shape[0]
-                            R[i0:i1, i0:i1] = Rk
-                            i0 = i1
-                    if recoveries and recoveries[-1][0] == te:
-                        st.Pp[e] = P  # the gate recovery inflated P(e|e-1): the smoother needs it
-                    x, P = kf_update(x, P, z, R, H)
-                    P = 0.5 * (P + P.T)
-                    if config.check_health:
-                        _check(x, P, te, "update")
-                    st.fb[e] = x
-                    kernels.apply_feedback(pos, vel, C, pnom, x)
-                    x = np.zeros(n)
-            timing["updates"] += perf() - c0
-            st.Pf[e] = P
-            st.pnom[e] = pnom
-            # the IMU sample that sits on this epoch holds the post-feedback state
-            if frac == 0.0 and t[j - 1] == te:
-                kernels.store_nav(st.nav, j - 1, pos, vel, C)
-                st.seg[j - 1], st.post[j - 1] = e, True
-            completed = e
-    except FilterHealthError as exc:
-        error = exc
-
-    n_ok = completed + 1
-    # IMU-rate rows that belong to completed epochs
-    n_rows = int(np.searchsorted(t, ep_t[completed], side="right")) if n_ok >= 1 else 0
-
-    c0 = perf()
-    forward = assemble_table(t, st, ep_t, n_rows, layout, None)
-    timing["output"] = perf() - c0
-    smoothed = None
-    Ps = None
-    timing["smoother"] = 0.0
-    if config.smoother and n_ok >= 2:
-        c0 = perf()
-        xs_plus, xs_minus, Ps = smooth(st, n_ok)
-        smoothed = assemble_table(t, st, ep_t, n_rows, layout, (xs_plus, xs_minus, Ps))
-        timing["smoother"] = perf() - c0
-
-    innovations, rejected = innovation_tables(log, recoveries)
-    timing["total"] = perf() - t_start_total
-    final = NavState(pos[0], pos[1], pos[2], vel.copy(), C.copy(), float(ep_t[max(completed, 0)]))
-    return FilterResult(
-        forward=forward, smoothed=smoothed, innovations=innovations, rejected=rejected,
-        complete=error is None, timing=timing, layout=layout, epoch_times=ep_t[:n_ok].copy(),
-        P_filtered=st.Pf[:n_ok], P_predicted=st.Pp[:n_ok], feedback=st.fb[:n_ok],
-        P_smoothed=None if Ps is None else Ps[:n_ok], error=error, final=final,
-        params=st.pnom[:n_ok])
+    model = StrapdownModel(imu, initial, extras, config)
+    return run_engine(model, measurements, config, progress)

@@ -1,6 +1,6 @@
-"""Compiled (numba) kernels of the error-state filter: nominal propagation with accumulation of
-the error dynamics, discretisation (second order or van Loan), feedback, the backward pass of
-the smoother and the assembly of the IMU-rate output tables.
+"""Compiled (numba) kernels of the strapdown error-state model: nominal propagation with
+accumulation of the error dynamics, discretisation (second order or van Loan), feedback and the
+assembly of the IMU-rate output tables (the smoother's backward pass is in :mod:`.smoother`).
 
 Nothing here loops in Python per IMU sample; the engine calls :func:`propagate_nominal` and
 :func:`discretize` once per filter epoch.
@@ -17,7 +17,7 @@ import numpy as np
 from numba import njit
 
 from ..attitude import euler_to_dcm_nb, rotvec_to_dcm_nb
-from ..earth import radii
+from ..earth import gravity_somigliana, radii
 from ..mechanization.strapdown import STEP_WORK_SHAPE, strapdown_step
 from .models import accumulate_error_dynamics
 
@@ -44,9 +44,60 @@ _euler_dcm = euler_to_dcm_nb  # one compiled implementation (insgnss.attitude)
 
 
 @njit(cache=True)
+def interval_step(pos, vel, C, pnom, dth_j, dv_j, a, dt_s, i_sg, i_sa, gravity_model,
+                  attitude_update, F, Qg, Qa, q_g, q_a, dyn, dthc, dvc, work):
+    """One IMU interval (share ``a`` of row ``dth_j, dv_j``, duration ``dt_s``) of the strapdown
+    process model: compensate the increments with the nominal biases (and scale factors) in
+    ``pnom``, add ``F dt`` (:func:`.models.accumulate_error_dynamics`) to ``F`` and the rotated
+    white-noise integrals ``C diag(q_g) C^T dt``, ``C diag(q_a) C^T dt`` to ``Qg``, ``Qa``, then
+    advance the nominal ``pos, vel, C`` (:func:`strapdown_step`). ``dthc, dvc`` receive the
+    compensated increments.
+
+    ``dyn = (k_a, k_g)`` adds dynamics-dependent white noise (unmodelled scale-factor,
+    g-sensitivity and vibration errors): a white error of the fraction ``k_a`` of the interval's
+    dynamic velocity increment and ``k_g`` of its angle increment, i.e. the variances
+    ``(k_a |C dv - g dt|)^2`` and ``(k_g |dtheta|)^2`` (isotropic) on the velocity and attitude.
+    """
+    for i in range(3):
+        g = a * dth_j[i] - pnom[i] * dt_s
+        f = a * dv_j[i] - pnom[3 + i] * dt_s
+        if i_sg >= 0:
+            g /= 1.0 + pnom[i_sg - 9 + i]
+        if i_sa >= 0:
+            f /= 1.0 + pnom[i_sa - 9 + i]
+        dthc[i] = g
+        dvc[i] = f
+    accumulate_error_dynamics(F, dt_s, pos[0], pos[2], vel, C, dthc, dvc, i_sg, i_sa)
+    va_dyn = 0.0
+    vg_dyn = 0.0
+    if dyn[0] > 0.0 or dyn[1] > 0.0:
+        de = C[0, 0] * dvc[0] + C[0, 1] * dvc[1] + C[0, 2] * dvc[2]
+        dn = C[1, 0] * dvc[0] + C[1, 1] * dvc[1] + C[1, 2] * dvc[2]
+        du = C[2, 0] * dvc[0] + C[2, 1] * dvc[1] + C[2, 2] * dvc[2]
+        du -= gravity_somigliana(pos[0], pos[2]) * dt_s
+        va_dyn = dyn[0] * dyn[0] * (de * de + dn * dn + du * du)
+        vg_dyn = dyn[1] * dyn[1] * (dthc[0] ** 2 + dthc[1] ** 2 + dthc[2] ** 2)
+    for r in range(3):
+        for c in range(r, 3):
+            qg = 0.0
+            qa = 0.0
+            for k in range(3):
+                qg += C[r, k] * q_g[k] * C[c, k]
+                qa += C[r, k] * q_a[k] * C[c, k]
+            Qg[r, c] += qg * dt_s
+            Qa[r, c] += qa * dt_s
+            if c != r:
+                Qg[c, r] += qg * dt_s
+                Qa[c, r] += qa * dt_s
+        Qg[r, r] += vg_dyn
+        Qa[r, r] += va_dyn
+    strapdown_step(pos, vel, C, dthc, dvc, dt_s, gravity_model, attitude_update, False, work)
+
+
+@njit(cache=True)
 def propagate_nominal(t, dth, dv, j, frac, t_end, pos, vel, C, pnom, i_sg, i_sa,
                       gravity_model, attitude_update, sub_T, Fint, Qint, sub_dt, q_g, q_a,
-                      nav_out, out_seg, seg_id, rates):
+                      nav_out, out_seg, seg_id, rates, dyn=None):
     """Mechanize from the current point (row ``j``, share ``frac`` consumed) to ``t_end``.
 
     The nominal state ``pos, vel, C`` is advanced in place using the increments compensated
@@ -57,7 +108,8 @@ def propagate_nominal(t, dth, dv, j, frac, t_end, pos, vel, C, pnom, i_sg, i_sa,
 
     Over covariance sub-intervals of length ``sub_T`` (restarted at the segment start, the
     last one possibly shorter), ``Fint[s]`` receives ``int F dt``, ``Qint[s, 0 / 1]`` the
-    integrals of ``C diag(q_g) C^T`` and ``C diag(q_a) C^T`` and ``sub_dt[s]`` the duration.
+    integrals of ``C diag(q_g) C^T`` and ``C diag(q_a) C^T`` and ``sub_dt[s]`` the duration
+    (:func:`interval_step`; ``dyn``: its dynamics-dependent noise, default none).
 
     ``rates`` (4, 3) receives the compensated angular rate and specific force of the last
     interval (rows 0, 2) and their means over the segment (rows 1, 3).
@@ -69,6 +121,10 @@ def propagate_nominal(t, dth, dv, j, frac, t_end, pos, vel, C, pnom, i_sg, i_sa,
     work = np.empty(STEP_WORK_SHAPE)  # strapdown_step scratch
     dthc = np.empty(3)
     dvc = np.empty(3)
+    dyn_k = np.zeros(2)
+    if dyn is not None:
+        dyn_k[0] = dyn[0]
+        dyn_k[1] = dyn[1]
     sum_th = np.zeros(3)
     sum_dv = np.zeros(3)
     sum_dt = 0.0
@@ -85,15 +141,6 @@ def propagate_nominal(t, dth, dv, j, frac, t_end, pos, vel, C, pnom, i_sg, i_sa,
         else:
             a = (t_end - t_start) / dt_full
         dt_s = a * dt_full
-        for i in range(3):
-            g = a * dth[j, i] - pnom[i] * dt_s
-            f = a * dv[j, i] - pnom[3 + i] * dt_s
-            if i_sg >= 0:
-                g /= 1.0 + pnom[i_sg - 9 + i]
-            if i_sa >= 0:
-                f /= 1.0 + pnom[i_sa - 9 + i]
-            dthc[i] = g
-            dvc[i] = f
         if s < 0 or acc >= sub_T * (1.0 - 1e-9):
             s += 1
             for r in range(n):
@@ -105,22 +152,11 @@ def propagate_nominal(t, dth, dv, j, frac, t_end, pos, vel, C, pnom, i_sg, i_sa,
                         Qint[s, r, c, k] = 0.0
             sub_dt[s] = 0.0
             acc = 0.0
-        accumulate_error_dynamics(Fint[s], dt_s, pos[0], pos[2], vel, C, dthc, dvc, i_sg, i_sa)
-        for r in range(3):
-            for c in range(r, 3):
-                qg = 0.0
-                qa = 0.0
-                for k in range(3):
-                    qg += C[r, k] * q_g[k] * C[c, k]
-                    qa += C[r, k] * q_a[k] * C[c, k]
-                Qint[s, 0, r, c] += qg * dt_s
-                Qint[s, 1, r, c] += qa * dt_s
-                if c != r:
-                    Qint[s, 0, c, r] += qg * dt_s
-                    Qint[s, 1, c, r] += qa * dt_s
+        interval_step(pos, vel, C, pnom, dth[j], dv[j], a, dt_s, i_sg, i_sa, gravity_model,
+                      attitude_update, Fint[s], Qint[s, 0], Qint[s, 1], q_g, q_a, dyn_k, dthc,
+                      dvc, work)
         sub_dt[s] += dt_s
         acc += dt_s
-        strapdown_step(pos, vel, C, dthc, dvc, dt_s, gravity_model, attitude_update, False, work)
         for i in range(3):
             sum_th[i] += dthc[i]
             sum_dv[i] += dvc[i]
@@ -141,33 +177,6 @@ def propagate_nominal(t, dth, dv, j, frac, t_end, pos, vel, C, pnom, i_sg, i_sa,
             rates[1, i] = sum_th[i] / sum_dt
             rates[3, i] = sum_dv[i] / sum_dt
     return j, frac, s + 1
-
-
-@njit(cache=True)
-def nis(S, y):
-    """Normalised innovation squared ``y^T S^-1 y`` by Cholesky; NaN if S is not PD."""
-    m = y.shape[0]
-    L = np.zeros((m, m))
-    for i in range(m):
-        for k in range(i + 1):
-            v = S[i, k]
-            for q in range(k):
-                v -= L[i, q] * L[k, q]
-            if i == k:
-                if not v > 0.0:
-                    return np.nan
-                L[i, i] = np.sqrt(v)
-            else:
-                L[i, k] = v / L[k, k]
-    w = np.empty(m)
-    out = 0.0
-    for i in range(m):
-        v = y[i]
-        for q in range(i):
-            v -= L[i, q] * w[q]
-        w[i] = v / L[i, i]
-        out += w[i] * w[i]
-    return out
 
 
 # --- small dense linear algebra (explicit loops: fast for n <= 30 and quick to compile; slice
@@ -294,11 +303,13 @@ def expm_nb(A):
 
 
 @njit(cache=True)
-def discretize(Fint, Qint, sub_dt, n_sub, decay, qdiag, method, Phi_tot, Qd_tot):
+def discretize(Fint, Qint, sub_dt, n_sub, decay, qdiag, method, Phi_tot, Qd_tot, Fx=None,
+               Qx=None):
     """Transition matrix and process noise of a segment from its covariance sub-intervals.
 
-    For each sub-interval of duration T with ``FT = int F dt - diag(decay) T`` and
-    ``QT = int G Q G^T dt``:
+    For each sub-interval of duration T with ``FT = int F dt - diag(decay) T (+ Fx T)`` and
+    ``QT = int G Q G^T dt (+ Qx T)`` (``Fx``, ``Qx``: the constant dynamics and noise PSD of
+    coupled augmenting states, e.g. a receiver clock's bias-drift block; default none):
 
     - ``method = 0`` (second order): ``Phi = I + FT + FT^2 / 2``,
       ``Qd = QT + (FT QT + QT FT^T) / 2 + (FT^2 QT + 2 FT QT FT^T + QT FT^T^2) / 6``
@@ -335,6 +346,14 @@ def discretize(Fint, Qint, sub_dt, n_sub, decay, qdiag, method, Phi_tot, Qd_tot)
                 QT[r, c] = 0.0
             FT[r, r] -= decay[r] * T
             QT[r, r] = qdiag[r] * T
+        if Fx is not None:
+            for r in range(n):
+                for c in range(n):
+                    FT[r, c] += Fx[r, c] * T
+        if Qx is not None:
+            for r in range(n):
+                for c in range(n):
+                    QT[r, c] += Qx[r, c] * T
         for r in range(3):
             for c in range(3):
                 QT[6 + r, 6 + c] += Qint[s, 0, r, c]
@@ -414,100 +433,6 @@ def apply_feedback(pos, vel, C, pnom, x):
     _copy(Cn, C)
     for i in range(pnom.shape[0]):
         pnom[i] -= x[9 + i]
-
-
-@njit(cache=True)
-def _chol_solve(P, B, L, out):
-    """``out = P^-1 B`` for symmetric positive definite P (Cholesky); False if not PD."""
-    n = P.shape[0]
-    for i in range(n):
-        for k in range(i + 1):
-            v = P[i, k]
-            for q in range(k):
-                v -= L[i, q] * L[k, q]
-            if i == k:
-                if not v > 0.0:
-                    return False
-                L[i, i] = np.sqrt(v)
-            else:
-                L[i, k] = v / L[k, k]
-    m = B.shape[1]
-    for c in range(m):
-        for i in range(n):  # forward
-            v = B[i, c]
-            for q in range(i):
-                v -= L[i, q] * out[q, c]
-            out[i, c] = v / L[i, i]
-        for i in range(n - 1, -1, -1):  # backward
-            v = out[i, c]
-            for q in range(i + 1, n):
-                v -= L[q, i] * out[q, c]
-            out[i, c] = v / L[i, i]
-    return True
-
-
-@njit(cache=True)
-def rts_backward(Pf, Pp, Phi, fb, n_ep, xs_plus, xs_minus, Ps):
-    """Backward pass of the RTS smoother in closed-loop error-state form.
-
-    For epochs ``e = 0 .. n_ep-1`` with filtered covariance ``Pf[e] = P(e|e)``, predicted
-    ``Pp[e] = P(e|e-1)``, transition ``Phi[e]`` from ``e-1`` to ``e`` and the feedback
-    ``fb[e]`` (the filtered error estimate removed from the nominal at ``e``):
-
-    - ``xs_plus[e]`` is the smoothed error relative to the corrected (post-feedback) nominal
-      at ``e``; ``xs_minus[e] = xs_plus[e] + fb[e]`` the same relative to the pre-feedback
-      nominal, which is what the forward prediction from ``e-1`` refers to;
-    - ``A = P(e|e) Phi[e+1]^T P(e+1|e)^-1``, ``xs_plus[e] = A xs_minus[e+1]`` (the filtered
-      error at ``e`` after the reset is zero and so is its prediction),
-      ``Ps[e] = P(e|e) + A (Ps[e+1] - P(e+1|e)) A^T``.
-
-    Returns the number of epochs where ``P(e+1|e)`` was not positive definite (skipped:
-    the smoothed values there are the filtered ones).
-    """
-    n = Pf.shape[1]
-    At = np.empty((n, n))
-    B = np.empty((n, n))
-    L = np.empty((n, n))
-    D = np.empty((n, n))
-    T1 = np.empty((n, n))
-    bad = 0
-    for i in range(n):
-        xs_plus[n_ep - 1, i] = 0.0
-        xs_minus[n_ep - 1, i] = fb[n_ep - 1, i]
-        for k in range(n):
-            Ps[n_ep - 1, i, k] = Pf[n_ep - 1, i, k]
-    for e in range(n_ep - 2, -1, -1):
-        # A^T = Pp^-1 (Phi Pf)   (Pf, Pp symmetric)
-        _mm(Phi[e + 1], Pf[e], B)
-        if not _chol_solve(Pp[e + 1], B, L, At):
-            bad += 1
-            for i in range(n):
-                xs_plus[e, i] = 0.0
-                for k in range(n):
-                    Ps[e, i, k] = Pf[e, i, k]
-        else:
-            for i in range(n):
-                v = 0.0
-                for k in range(n):
-                    v += At[k, i] * xs_minus[e + 1, k]
-                xs_plus[e, i] = v
-            for i in range(n):
-                for k in range(n):
-                    D[i, k] = Ps[e + 1, i, k] - Pp[e + 1, i, k]
-            # Ps = Pf + A D A^T = Pf + At^T D At
-            _mm(D, At, T1)  # D At
-            for i in range(n):
-                for k in range(i, n):
-                    v = 0.0
-                    for q in range(n):
-                        v += At[q, i] * T1[q, k]
-                    Ps[e, i, k] = Pf[e, i, k] + v
-            for i in range(n):
-                for k in range(i + 1, n):
-                    Ps[e, k, i] = Ps[e, i, k]
-        for i in range(n):
-            xs_minus[e, i] = xs_plus[e, i] + fb[e, i]
-    return bad
 
 
 @njit(cache=True)

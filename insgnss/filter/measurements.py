@@ -22,6 +22,13 @@ Models
   scale-factor state and optional IMU-to-vehicle misalignment states. This is the hook
   used by the land-vehicle and RISS processing.
 
+High rate: :class:`Zupt`, :class:`Zaru` and :class:`BodyVelocity` have one compiled (numba)
+implementation of their ``(z, H, R)`` (:func:`evaluate_compiled`), used by their
+:meth:`~Measurement.evaluate` and by the engine's compiled high-rate path
+(:mod:`insgnss.filter.highrate`): built with ``high_rate=True`` they are applied at the IMU
+sample nearest each of their times inside compiled code (ZUPT/ZARU at every IMU sample of a
+foot-mounted INS, NHC, odometer), with the same gating, recovery and logs.
+
 GNSS quality: per-epoch ``*_std`` columns are used as the measurement sigmas; an optional
 ``std_scale`` mapping ``{q: multiplier}`` inflates them by RTKLIB quality flag ``q``
 (``q`` values absent from the mapping are skipped when ``use_q`` restricts them).
@@ -30,9 +37,11 @@ GNSS quality: per-epoch ``*_std`` columns are used as the measurement sigmas; an
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
+from typing import NamedTuple
 
 import numpy as np
 import pandas as pd
+from numba import njit
 
 from ..attitude import wrap_pi
 from ..earth import OMEGA_E
@@ -104,6 +113,9 @@ class Measurement:
 
     name = "measurement"
 
+    #: applied by the compiled high-rate path of the engine (models with :meth:`compiled`)
+    high_rate = False
+
     def __init__(self, times, gate_probability: float | None = None, name: str | None = None):
         self.times = np.asarray(times, dtype=float).reshape(-1)
         if self.times.size and not np.all(np.isfinite(self.times)):
@@ -111,6 +123,11 @@ class Measurement:
         self.gate_probability = gate_probability
         if name is not None:
             self.name = name
+
+    def compiled(self, layout: StateLayout) -> CompiledSpec | None:
+        """The model's description for the compiled path (:func:`evaluate_compiled`), or
+        None if it has no compiled implementation."""
+        return None
 
     def extra_states(self) -> list[ExtraState]:
         """States this measurement needs appended to the error state (default none)."""
@@ -126,6 +143,149 @@ class Measurement:
     def __repr__(self) -> str:
         return f"{type(self).__name__}(name={self.name!r}, epochs={self.times.size})"
 
+
+
+# --- compiled implementation shared by the Python and the high-rate update paths -------------------
+ZUPT, ZARU, BODY_VELOCITY = 0, 1, 2
+
+
+class CompiledSpec(NamedTuple):
+    """A measurement model for :func:`evaluate_compiled`: ``kind``, integer and float
+    parameters ``ip`` (8,), ``fp`` (8,) and per-epoch ``values`` and ``std`` (N, 3)."""
+
+    kind: int
+    ip: np.ndarray
+    fp: np.ndarray
+    values: np.ndarray
+    std: np.ndarray
+
+
+@njit(cache=True)
+def evaluate_compiled(kind, ip, fp, val, std, vel, C, lat, w_ib, window, gyro_psd, pnom, z, H, R):
+    """``(z, H, R)`` of a compiled measurement model (``kind`` ZUPT, ZARU or BODY_VELOCITY with
+    the parameters of :meth:`Measurement.compiled`) at one epoch, written into ``z`` (3,),
+    the first rows of ``H`` (3, n) and ``R`` (3, 3). Returns the dimension (0: nothing to use).
+
+    The nominal: ENU velocity ``vel``, ``C = C_b^l``, latitude, the compensated angular rate
+    ``w_ib`` (of the last IMU interval, or averaged over ``window`` seconds), the gyro white-noise
+    PSD and the parameter nominal ``pnom`` (error-state index 9 onwards). Equations: module
+    docstring and the classes :class:`Zupt`, :class:`Zaru`, :class:`BodyVelocity`.
+    """
+    n = H.shape[1]
+    for a in range(3):
+        for c in range(n):
+            H[a, c] = 0.0
+        for b in range(3):
+            R[a, b] = 0.0
+    if kind == ZUPT:
+        for a in range(3):
+            z[a] = vel[a]
+            H[a, 3 + a] = 1.0
+            R[a, a] = std[a] * std[a]
+        return 3
+    if kind == ZARU:
+        wie1 = OMEGA_E * np.cos(lat)
+        wie2 = OMEGA_E * np.sin(lat)
+        for a in range(3):
+            z[a] = w_ib[a] - (C[1, a] * wie1 + C[2, a] * wie2)
+            H[a, 9 + a] = -1.0
+            # -C^T [w_ie x], [w_ie x] = [[0, -wu, wn], [wu, 0, 0], [-wn, 0, 0]]
+            H[a, 6] = -(C[1, a] * wie2 - C[2, a] * wie1)
+            H[a, 7] = -(-C[0, a] * wie2)
+            H[a, 8] = -(C[0, a] * wie1)
+            if fp[3] >= 0.0:
+                s = fp[3 + a]
+            else:
+                if window <= 0.0:
+                    return 0
+                s = np.sqrt(gyro_psd[a] / window)
+            s = max(s, fp[6])
+            R[a, a] = s * s
+        return 3
+    # body velocity: v_b = C^T v + w x l, v_v = (I - [mu x]) v_b, h_k = (1 + s) v_v[k]
+    k = ip[0]
+    for r in range(k):
+        if not np.isfinite(val[r]):
+            return 0
+    l0, l1, l2 = fp[0], fp[1], fp[2]
+    vb = np.empty(3)
+    J = np.zeros((3, n))
+    for a in range(3):
+        vb[a] = C[0, a] * vel[0] + C[1, a] * vel[1] + C[2, a] * vel[2]
+        for c in range(3):
+            J[a, 3 + c] = C[c, a]
+    vb[0] += w_ib[1] * l2 - w_ib[2] * l1
+    vb[1] += w_ib[2] * l0 - w_ib[0] * l2
+    vb[2] += w_ib[0] * l1 - w_ib[1] * l0
+    # C^T [v x]
+    for a in range(3):
+        J[a, 6] = C[1, a] * vel[2] - C[2, a] * vel[1]
+        J[a, 7] = -C[0, a] * vel[2] + C[2, a] * vel[0]
+        J[a, 8] = C[0, a] * vel[1] - C[1, a] * vel[0]
+    # [l x]
+    J[0, 10], J[0, 11] = -l2, l1
+    J[1, 9], J[1, 11] = l2, -l0
+    J[2, 9], J[2, 10] = -l1, l0
+    vv = vb
+    im = ip[6]
+    if im >= 0:
+        m0, m1, m2 = pnom[im - 9], pnom[im - 8], pnom[im - 7]
+        Rm = np.array([[1.0, m2, -m1], [-m2, 1.0, m0], [m1, -m0, 1.0]])  # I - [mu x]
+        vv = np.empty(3)
+        J2 = np.empty((3, n))
+        for a in range(3):
+            vv[a] = Rm[a, 0] * vb[0] + Rm[a, 1] * vb[1] + Rm[a, 2] * vb[2]
+            for c in range(n):
+                J2[a, c] = Rm[a, 0] * J[0, c] + Rm[a, 1] * J[1, c] + Rm[a, 2] * J[2, c]
+        J = J2
+        # d v_v / d mu = [v_b x]
+        J[0, im], J[0, im + 1], J[0, im + 2] = 0.0, -vb[2], vb[1]
+        J[1, im], J[1, im + 1], J[1, im + 2] = vb[2], 0.0, -vb[0]
+        J[2, im], J[2, im + 1], J[2, im + 2] = -vb[1], vb[0], 0.0
+    isc = ip[4]
+    sc = pnom[isc - 9] if isc >= 0 else 0.0
+    for r in range(k):
+        ax = ip[1 + r]
+        h = vv[ax]
+        for c in range(n):
+            H[r, c] = J[ax, c]
+        if isc >= 0 and ax == ip[5]:
+            for c in range(n):
+                H[r, c] *= 1.0 + sc
+            H[r, isc] = vv[ip[5]]
+            h *= 1.0 + sc
+        z[r] = h - val[r]
+        R[r, r] = std[r] * std[r]
+    return k
+
+
+def _run_compiled(spec: CompiledSpec, i: int, nav: NominalState, w, window):
+    """:func:`evaluate_compiled` on a NominalState (the Python update path)."""
+    n = nav.layout.n
+    z, H, R = np.empty(3), np.empty((3, n)), np.empty((3, 3))
+    k = evaluate_compiled(spec.kind, spec.ip, spec.fp, spec.values[i], spec.std[i], nav.vel,
+                          nav.C, nav.lat, w, window, nav.gyro_psd, nav.params, z, H, R)
+    if k == 0:
+        return None
+    return z[:k], H[:k], R[:k, :k]
+
+
+def _per_epoch(std, n: int, width: int, what: str) -> np.ndarray:
+    """Sigmas as (n, width): scalar, per-component vector, per-epoch (n,) or (n, width)."""
+    s = np.asarray(std, float)
+    if s.ndim == 1 and s.size == n and s.size != width:  # one sigma per epoch
+        s = s[:, None]
+    try:
+        return np.ascontiguousarray(np.broadcast_to(s, (n, width)), dtype=float)
+    except ValueError:
+        raise ValueError(f"{what}: std must be a scalar, {width} values, {n} values or an "
+                         f"({n}, {width}) array; got shape {s.shape}") from None
+
+
+def _pad3(a: np.ndarray) -> np.ndarray:
+    out = np.full((a.shape[0], 3), np.nan)
+    out[:, :a.shape[1]] = a
+    return out
 
 def cross3(a, b) -> np.ndarray:
     """Cross product of two 3-vectors (np.cross costs ~100 us of argument handling per call,
@@ -272,21 +432,27 @@ class Zupt(Measurement):
     Parameters
     ----------
     times : array_like
-    std : float or 3-vector
-        Sigma of the zero-velocity pseudo-measurement [m/s].
+    std : float, 3-vector, (N,) or (N, 3)
+        Sigma of the zero-velocity pseudo-measurement [m/s] (per epoch: e.g. a soft ZUPT
+        weighted by the stillness statistic).
+    high_rate : bool
+        Apply it on the engine's compiled high-rate path (at the IMU sample nearest each time).
     """
 
     name = "zupt"
 
     def __init__(self, times, std=0.01, gate_probability: float | None = None,
-                 name: str | None = None):
+                 name: str | None = None, high_rate: bool = False):
         super().__init__(times, gate_probability, name)
-        self.R = np.diag(_vec3(std, "std") ** 2)
+        self.std = _per_epoch(std, self.times.size, 3, "Zupt")
+        self.high_rate = bool(high_rate)
+        self._spec = CompiledSpec(ZUPT, np.zeros(8, np.int64), np.zeros(8), self.std, self.std)
+
+    def compiled(self, layout):
+        return self._spec
 
     def evaluate(self, i, nav):
-        H = np.zeros((3, nav.layout.n))
-        H[0, 3] = H[1, 4] = H[2, 5] = 1.0
-        return nav.vel.copy(), H, self.R
+        return _run_compiled(self._spec, i, nav, nav.omega_ib, 0.0)
 
 
 class Zaru(Measurement):
@@ -301,33 +467,36 @@ class Zaru(Measurement):
     std : float or 3-vector, optional
         Sigma [rad/s]. Default: the gyro white noise averaged over the window,
         ``sqrt(psd / window)``, floored at ``min_std``.
+    high_rate : bool
+        Apply it on the engine's compiled high-rate path (at the IMU sample nearest each time;
+        the averaging window is then that IMU interval).
     """
 
     name = "zaru"
 
     def __init__(self, times, std=None, average: bool = True, min_std: float = 1e-7,
-                 gate_probability: float | None = None, name: str | None = None):
+                 gate_probability: float | None = None, name: str | None = None,
+                 high_rate: bool = False):
         super().__init__(times, gate_probability, name)
         self.std = None if std is None else _vec3(std, "std")
         self.average = bool(average)
         self.min_std = float(min_std)
+        self.high_rate = bool(high_rate)
+        fp = np.zeros(8)
+        fp[3:6] = -1.0 if self.std is None else self.std
+        fp[6] = self.min_std
+        ip = np.zeros(8, np.int64)
+        ip[7] = int(self.average)
+        empty = np.zeros((self.times.size, 3))
+        self._spec = CompiledSpec(ZARU, ip, fp, empty, empty)
+
+    def compiled(self, layout):
+        return self._spec
 
     def evaluate(self, i, nav):
         w = nav.omega_ib_mean if self.average else nav.omega_ib
-        w_ie = np.array([0.0, OMEGA_E * np.cos(nav.lat), OMEGA_E * np.sin(nav.lat)])
-        z = w - nav.C.T @ w_ie
-        H = np.zeros((3, nav.layout.n))
-        H[0, 9] = H[1, 10] = H[2, 11] = -1.0
-        H[:, 6:9] = -nav.C.T @ skew(w_ie)
-        if self.std is not None:
-            s = self.std
-        else:
-            window = nav.segment_duration if self.average else 0.0
-            if window <= 0.0:
-                return None
-            s = np.sqrt(nav.gyro_psd / window)
-        s = np.maximum(s, self.min_std)
-        return z, H, np.diag(s**2)
+        window = nav.segment_duration if self.average else 0.0
+        return _run_compiled(self._spec, i, nav, w, window)
 
 
 class Cupt(Measurement):
@@ -465,6 +634,8 @@ class BodyVelocity(Measurement):
         Name of a 3-element IMU-to-vehicle misalignment state (random constant).
     misalignment_std : float
         Initial sigma of the misalignment [rad].
+    high_rate : bool
+        Apply it on the engine's compiled high-rate path (at the IMU sample nearest each time).
     """
 
     name = "body_velocity"
@@ -473,8 +644,10 @@ class BodyVelocity(Measurement):
                  lever_arm=(0.0, 0.0, 0.0), scale_state: str | None = None, scale_axis: int = 1,
                  scale_std: float = 0.01, scale_psd: float = 0.0,
                  misalignment_state: str | None = None, misalignment_std: float = 0.02,
-                 gate_probability: float | None = None, name: str | None = None):
+                 gate_probability: float | None = None, name: str | None = None,
+                 high_rate: bool = False):
         super().__init__(times, gate_probability, name)
+        self.high_rate = bool(high_rate)
         n = self.times.size
         self.axes = np.asarray(axes, int).reshape(-1)
         k = self.axes.size
@@ -507,33 +680,21 @@ class BodyVelocity(Measurement):
                                           f"{self.misalignment_state}_z")))
         return out
 
+    def compiled(self, layout):
+        spec = getattr(self, "_spec", None)
+        if spec is not None and spec[0] is layout:
+            return spec[1]
+        ip = np.full(8, -1, np.int64)
+        ip[0] = self.axes.size
+        ip[1:1 + self.axes.size] = self.axes
+        ip[4] = layout.index(self.scale_state) if self.scale_state else -1
+        ip[5] = self.scale_axis
+        ip[6] = layout.index(self.misalignment_state) if self.misalignment_state else -1
+        fp = np.zeros(8)
+        fp[0:3] = self.lever_arm
+        spec = CompiledSpec(BODY_VELOCITY, ip, fp, _pad3(self.values), _pad3(self.std))
+        self._spec = (layout, spec)
+        return spec
+
     def evaluate(self, i, nav):
-        meas = self.values[i]
-        if not np.all(np.isfinite(meas)):
-            return None
-        layout: StateLayout = nav.layout
-        CT = nav.C.T
-        l = self.lever_arm
-        vb = CT @ nav.vel + cross3(nav.omega_ib, l)
-        J = np.zeros((3, layout.n))  # d v_b / d x
-        J[:, 3:6] = CT
-        J[:, 6:9] = CT @ skew(nav.vel)
-        J[:, 9:12] = skew(l)
-        if self.misalignment_state:
-            mu = nav.param(self.misalignment_state)
-            Rm = np.eye(3) - skew(mu)
-            vv = Rm @ vb
-            J = Rm @ J
-            J[:, layout[self.misalignment_state]] = skew(vb)
-        else:
-            vv = vb
-        h = vv[self.axes].copy()
-        H = J[self.axes].copy()
-        if self.scale_state:
-            s = float(nav.param(self.scale_state)[0])
-            rows = np.nonzero(self.axes == self.scale_axis)[0]
-            for r in rows:
-                H[r] *= 1.0 + s
-                H[r, layout[self.scale_state]] = vv[self.scale_axis]
-                h[r] *= 1.0 + s
-        return h - meas, H, np.diag(self.std[i] ** 2)
+        return _run_compiled(self.compiled(nav.layout), i, nav, nav.omega_ib, 0.0)

@@ -39,7 +39,7 @@ wrapper returning F itself (used by tests and for inspection).
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 from numba import njit
@@ -77,6 +77,15 @@ class ExtraState:
         Initial nominal value of the parameter (e.g. 0 for a scale-factor correction).
     labels : sequence of str, optional
         Output column names of the elements (default ``name`` or ``name_0, name_1, ...``).
+    dynamics : (size, size) nested sequence, optional
+        Constant continuous-time dynamics matrix of the block (added to ``-1 / tau`` on the
+        diagonal), for coupled states. A GNSS receiver clock (bias [m], drift [m/s]) is
+        ``dynamics=((0, 1), (0, 0))``, which the discretisation turns into
+        ``Phi = [[1, dt], [0, 1]]``.
+    noise : (size, size) nested sequence, optional
+        Driving-noise PSD matrix of the block (replaces ``psd``); the clock's
+        ``diag(q_bias, q_drift)`` gives ``Qd = [[q_b dt + q_d dt^3 / 3, q_d dt^2 / 2],
+        [q_d dt^2 / 2, q_d dt]]``.
     """
 
     name: str
@@ -86,6 +95,18 @@ class ExtraState:
     psd: float | tuple = 0.0
     initial_value: float | tuple = 0.0
     labels: tuple | None = None
+    dynamics: tuple | None = None
+    noise: tuple | None = None
+
+    def __post_init__(self):
+        for key in ("dynamics", "noise"):
+            v = getattr(self, key)
+            if v is not None:
+                a = np.asarray(v, float)
+                if a.shape != (self.size, self.size) or not np.all(np.isfinite(a)):
+                    raise ValueError(f"extra state {self.name!r}: {key} must be a finite "
+                                     f"{self.size} x {self.size} matrix")
+                object.__setattr__(self, key, tuple(map(tuple, a.tolist())))
 
     def element_labels(self) -> list[str]:
         if self.labels is not None:
@@ -195,6 +216,12 @@ class ProcessModel:
         Initial standard deviations.
     initial_values : (n - 9,) array
         Initial nominal values of the parameter states (index 9 onwards).
+    Fx, Qx : (n, n) arrays or None
+        Constant dynamics and noise PSD of coupled augmenting states
+        (:attr:`ExtraState.dynamics`, :attr:`ExtraState.noise`); None when there are none.
+    dyn_noise : (2,) array
+        Dynamics-dependent noise factors ``(k_a, k_g)`` [sqrt(s)] of
+        :func:`insgnss.filter.kernels.interval_step` (0: none).
     """
 
     layout: StateLayout
@@ -204,6 +231,9 @@ class ProcessModel:
     qdiag: np.ndarray
     p0: np.ndarray
     initial_values: np.ndarray
+    Fx: np.ndarray | None = None
+    Qx: np.ndarray | None = None
+    dyn_noise: np.ndarray = field(default_factory=lambda: np.zeros(2))
 
 
 def _bias_process(sigma_turn_on, sigma_instability, tau, rrw, model):
@@ -286,17 +316,25 @@ def process_model(
         sa = imu_model.accel_scale if initial_accel_scale_std is None else initial_accel_scale_std
         p0[layout["gyro_scale"]] = _triad(sg)
         p0[layout["accel_scale"]] = _triad(sa)
+    Fx = Qx = None
     for ex in layout.extras:
         sl = layout[ex.name]
         p0[sl] = np.broadcast_to(np.asarray(ex.initial_std, float), (ex.size,))
         decay[sl] = 0.0 if not np.isfinite(ex.tau) else 1.0 / ex.tau
-        qdiag[sl] = np.broadcast_to(np.asarray(ex.psd, float), (ex.size,))
+        if ex.noise is None:
+            qdiag[sl] = np.broadcast_to(np.asarray(ex.psd, float), (ex.size,))
+        else:
+            Qx = np.zeros((n, n)) if Qx is None else Qx
+            Qx[sl, sl] = np.asarray(ex.noise, float)
+        if ex.dynamics is not None:
+            Fx = np.zeros((n, n)) if Fx is None else Fx
+            Fx[sl, sl] = np.asarray(ex.dynamics, float)
         init[sl.start - 9:sl.stop - 9] = np.broadcast_to(np.asarray(ex.initial_value, float),
                                                          (ex.size,))
     if np.any(p0 < 0) or not np.all(np.isfinite(p0)):
         raise ValueError("initial standard deviations must be finite and non-negative")
     return ProcessModel(layout, _triad(imu_model.gyro_arw) ** 2, _triad(imu_model.accel_vrw) ** 2,
-                        decay, qdiag, p0, init)
+                        decay, qdiag, p0, init, Fx, Qx)
 
 
 # --- compiled dynamics -----------------------------------------------------------------------

@@ -62,19 +62,19 @@ how often P is formed in Python.
 
 Filter framework
 ----------------
-:func:`run_riss_filter` runs the same event loop as :func:`insgnss.filter.engine.run_filter`
-(epochs at the measurements and every ``epoch_interval``; chi-square gating; filterpy
-predict/update in Joseph form; closed-loop feedback and reset; error-state RTS smoother,
-:func:`insgnss.filter.smoother.rts_error_state`) and returns the same
-:class:`~insgnss.filter.engine.FilterResult` with the same table columns (``NAV_COLS``,
-``STD_COLS``, then the parameter states and their stds). The measurement models of
-:mod:`insgnss.filter.measurements` are used unchanged: they see a 15-state strapdown-like
-:class:`~insgnss.filter.measurements.NominalState` and their ``H`` is mapped to the RISS state
-by ``H T`` with ``T`` the linear map from the RISS error to ``(dr, dv, phi, db_g, db_a)``
-(``phi`` the l-frame misalignment implied by the heading, pitch and roll errors). Measurements
-that need extra states (e.g. an odometer ``BodyVelocity`` - the odometer is the RISS *input*)
-are refused. GNSS epochs between IMU samples are compared with the nominal of the last sample
-extrapolated with its velocity.
+:class:`RissModel` is a process model of the filter engine (:mod:`insgnss.filter.engine`):
+the engine runs the event loop (epochs at the measurements and every ``epoch_interval``;
+chi-square gating and gate recovery; health checks; filterpy predict/update in Joseph form;
+closed-loop feedback and reset; the smoother) and :func:`run_riss_filter` returns the same
+:class:`~insgnss.filter.engine.FilterResult` as :func:`insgnss.filter.engine.run_filter`, with
+the same table columns (``NAV_COLS``, ``STD_COLS``, then the parameter states and their
+stds). The measurement models of :mod:`insgnss.filter.measurements` are used unchanged: they
+see a 15-state strapdown-like :class:`~insgnss.filter.measurements.NominalState` and their
+``H`` is mapped to the RISS state by ``H T`` with ``T`` the linear map from the RISS error to
+``(dr, dv, phi, db_g, db_a)`` (``phi`` the l-frame misalignment implied by the heading, pitch
+and roll errors). Measurements that need extra states (e.g. an odometer ``BodyVelocity`` - the
+odometer is the RISS *input*) are refused. GNSS epochs between IMU samples are compared with
+the nominal of the last sample extrapolated with its velocity.
 """
 
 from __future__ import annotations
@@ -84,13 +84,11 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 import pandas as pd
-from filterpy.kalman import update as kf_update
 from numba import njit
-from scipy.stats import chi2
 
 from .. import earth
 from ..earth import OMEGA_E, radii
-from ..errors import ConfigError, FilterHealthError
+from ..errors import ConfigError
 from ..imu import grade
 from ..mechanization.riss import (
     N_PAR,
@@ -112,13 +110,14 @@ from ..mechanization.riss import (
     riss_velocity,
 )
 from ..mechanization.strapdown import NAV_COLS, NavState
-from . import kernels
-from .engine import FilterConfig, FilterResult, innovation_tables
+from .engine import FilterConfig, FilterResult, run_engine
 from .measurements import NominalState, Zaru
 from .models import NamedBlocks, StateLayout
-from .smoother import STD_COLS, rts_error_state
+from .process import ProcessModelBase
+from .strapdown_model import STD_COLS
 
-__all__ = ["RissConfig", "RissLayout", "run_riss_filter", "riss_process", "PROCESS_MODELS"]
+__all__ = ["RissConfig", "RissLayout", "RissModel", "run_riss_filter", "riss_process",
+           "PROCESS_MODELS"]
 
 #: process models a job can select (``process_model = "riss"``)
 PROCESS_MODELS = ("strapdown", "riss")
@@ -680,45 +679,144 @@ def _feedback(st, par, bparts, x, lay: RissLayout, Jp, Jr):
     par[1:4] = bparts[0] + bparts[1]
 
 
-def _check(P, time, what):
-    if not np.all(np.isfinite(P)):
-        raise FilterHealthError(f"RISS filter covariance became non-finite at t = {time:.6f} s "
-                                f"({what})", found="NaN/inf in P")
-    try:
-        np.linalg.cholesky(P)
-    except np.linalg.LinAlgError:
-        raise FilterHealthError(f"RISS covariance is not positive definite at t = {time:.6f} s "
-                                f"({what})", found="Cholesky factorisation failed") from None
+class RissModel(ProcessModelBase):
+    """The 3D RISS as a process model of the filter engine (module docstring).
 
+    Epochs sit on IMU samples (``split = False``); a measurement between samples sees the
+    nominal of the sample at or before it extrapolated with its velocity. Measurement models
+    see a 15-state strapdown :class:`~insgnss.filter.measurements.NominalState`; their ``H`` is
+    mapped by :func:`virtual_map` (and a ZARU reduced to its vertical row: the RISS has one
+    gyro).
+    """
 
-def _inflate_for(P, H, R, z, thr):
-    """P with its navigation blocks (position, velocity, heading: states 0-6) scaled until
-    ``z`` has NIS <= thr / 2 (the gate recovery of :func:`insgnss.filter.engine.run_filter`)."""
-    P = P.copy()
-    nav = slice(0, 7)
-    for _ in range(60):
-        S = H @ P @ H.T + R
-        if kernels.nis(S, z) <= 0.5 * thr or not np.any(H[:, nav]):
-            break
-        P[nav, :] *= 2.0 ** 0.5
-        P[:, nav] *= 2.0 ** 0.5
-    return P
+    n_nav = 7  # position, velocity, heading
+    split = False
+    noise_blocks = (slice(0, 3), slice(3, 6), slice(6, 7))
 
+    def __init__(self, inputs: RissInputs, initial: NavState, config: FilterConfig,
+                 riss: RissConfig, proc: RissProcess):
+        self.inputs = inputs
+        self.t = inputs.t
+        self.proc = proc
+        self.layout = lay = proc.layout
+        self.riss = riss
+        self.az_mode = azimuth_mode_id(riss.azimuth)
+        self.gmod = earth.gravity_model_id(config.gravity_model)
+        self.arrays = inputs.arrays()
+        m_imu = grade(config.imu_model) if isinstance(config.imu_model, str) else config.imu_model
+        self.gyro_psd = np.full(3, m_imu.gyro_arw**2)
+        self.st = initial_riss_state(initial)
+        self.par = proc.par0.copy()
+        # nominal bias parts: Gauss-Markov (row 0; decays with its correlation time, as its error
+        # model says) and turn-on (row 1); the kernel uses their sum par[1:4]
+        self.bparts = np.zeros((2, 3))
+        self.bparts[1 if lay.turn_on else 0] = self.par[1:4]
+        self.bdecay = proc.decay[5:8]
+        riss_velocity(self.st, inputs.v_od[0] / (1.0 + self.par[0]))
+        self.n_par = N_PAR + 6
+        self.j = 0  # current sample
+        self.timing = {"mechanization": 0.0, "covariance": 0.0}
+        ny = lay.ny
+        self.Phi_y = np.empty((ny, ny))
+        self.Q_y = np.empty((ny, ny))
+        self.cols = np.empty((5, 3))
 
-def _epochs(t, measurements, epoch_interval, dt_imu):
-    """Epoch sample indices (IMU samples at or before each measurement plus a regular grid) and
-    the measurement events ``(measurement, row, time)`` per epoch sample."""
-    events: dict[int, list] = {}
-    for m in measurements:
-        tm = np.asarray(m.times, float)
-        idx = np.searchsorted(t, tm + 1e-9, side="right") - 1
-        for row in np.nonzero((idx >= 1) & (tm - t[np.maximum(idx, 0)] < 2.0 * dt_imu))[0]:
-            events.setdefault(int(idx[row]), []).append((m, int(row), float(tm[row])))
-    step = max(int(round(epoch_interval / dt_imu)), 1)
-    ep = np.union1d(np.arange(0, t.size, step), np.fromiter(events, np.int64, len(events)))
-    if ep[-1] != t.size - 1:
-        ep = np.append(ep, t.size - 1)
-    return ep.astype(np.int64), events
+    def prepare(self, epochs: np.ndarray) -> None:
+        n_rows = self.t.size
+        self.out_st = np.empty((n_rows, 9))
+        self.out_aux = np.zeros((n_rows, 9))
+        self.out_st[0] = self.st
+        v0 = self.inputs.v_od[0]
+        self.out_aux[0] = [0.0, v0, 0.0, earth.normal_gravity(self.st[ST_LAT], self.st[ST_H]),
+                           0.0, 0.0, v0, 0.0, 0.0]
+        self.seg = np.zeros(n_rows, np.int64)
+        self.post = np.zeros(n_rows, np.bool_)
+        self.post[0] = True
+        self._epoch_state(0, 0)
+
+    def initial_covariance(self) -> np.ndarray:
+        return np.diag(self.proc.p0**2)
+
+    def _epoch_state(self, j0: int, j1: int) -> None:
+        """Jacobians and the measurement map at the epoch sample ``j1``."""
+        self.Jp, self.Jr, self.Jv, self.Gv = _jacobians_y(self.st, self.out_aux[j1], self.az_mode,
+                                                          self.layout)
+        self.T = None
+        self.seg_dur = self.t[j1] - self.t[j0]
+        self.j0 = j0
+
+    def propagate(self, t_end: float, node: int):
+        perf = _time.perf_counter
+        c0 = perf()
+        j0 = self.j
+        j1 = int(np.searchsorted(self.t, t_end))
+        riss_propagate(self.st, self.par, j0, j1, *self.arrays, self.gmod, self.az_mode,
+                       bool(self.riss.coriolis), self.layout.y_base, self.layout.y_twin,
+                       self.proc.qc, self.proc.decay, self.proc.qdiag, self.Phi_y, self.Q_y,
+                       self.out_st, self.out_aux)
+        if np.any(self.bdecay > 0):
+            self.bparts[0] *= np.exp(-self.bdecay * (self.t[j1] - self.t[j0]))
+            self.par[1:4] = self.bparts[0] + self.bparts[1]
+        self.seg[j0 + 1:j1 + 1] = node
+        self.j = j1
+        c1 = perf()
+        self._epoch_state(j0, j1)
+        riss_dcm_col(self.st[ST_A], self.st[ST_P], self.st[ST_R], self.cols)
+        Phi, Q = transition(self.proc, self.Phi_y, self.Q_y, self.Jv, self.Gv, self.cols[:3].T)
+        self.timing["mechanization"] += c1 - c0
+        self.timing["covariance"] += perf() - c1
+        return Phi, Q
+
+    def nominal_finite(self) -> bool:
+        return bool(np.all(np.isfinite(self.st)))
+
+    def nominal(self, time: float) -> NominalState:
+        j0, j1 = self.j0, self.j
+        dthz = np.sum(self.inputs.dtheta_z[j0 + 1:j1 + 1])
+        dur = self.seg_dur
+        wz = (dthz / dur - self.par[1]) / (1.0 + self.par[4]) if dur > 0 else 0.0
+        fmean = (np.array([0.0, 0.0, wz]), np.array([0.0, 0.0, 0.0]))
+        nav = _nominal_state(self.st, self.par, self.out_aux[j1], fmean, self.t[j1], dur,
+                             self.gyro_psd)
+        _extrapolate(nav, time - self.t[j1])
+        return nav
+
+    def observe(self, m, z, H, R):
+        if isinstance(m, Zaru):  # only the vertical gyro exists
+            z, H, R = z[2:], H[2:], R[2:, 2:]
+        if self.T is None:
+            self.T = virtual_map(self.layout, self.Jp, self.Jr, self.st)
+        return z, H @ self.T, R
+
+    def feedback(self, x: np.ndarray) -> None:
+        _feedback(self.st, self.par, self.bparts, x, self.layout, self.Jp, self.Jr)
+        self.out_st[self.j] = self.st
+
+    def params(self) -> np.ndarray:
+        return np.concatenate([self.par, self.bparts.ravel()])
+
+    def close_epoch(self, node: int, time: float) -> None:
+        self.seg[self.j] = node
+        self.post[self.j] = True
+
+    def output(self, store, n_nodes: int, n_rows: int, smoothed=None) -> pd.DataFrame:
+        t = self.t[:n_rows]
+        if smoothed is None:
+            zeros = np.zeros((n_nodes, self.layout.n))
+            return _assemble(t, self.out_st, self.out_aux, self.seg, self.post, store.t,
+                             store.Pf[:n_nodes], store.Pp[:n_nodes], zeros, zeros, store.par,
+                             self.proc)
+        xs_plus, xs_minus, Ps = smoothed
+        return _assemble(t, self.out_st, self.out_aux, self.seg, self.post, store.t, Ps, Ps,
+                         xs_plus, xs_minus, store.par, self.proc)
+
+    def final_state(self, time: float) -> NavState:
+        j = int(np.searchsorted(self.t, time))
+        s_end = self.out_st[j]
+        cols = np.empty((5, 3))
+        riss_dcm_col(s_end[ST_A], s_end[ST_P], s_end[ST_R], cols)
+        return NavState(s_end[ST_LAT], s_end[ST_LON], s_end[ST_H], s_end[ST_VE:ST_VU + 1].copy(),
+                        np.ascontiguousarray(cols[:3].T), float(self.t[j]))
 
 
 def run_riss_filter(
@@ -731,7 +829,8 @@ def run_riss_filter(
     *,
     inputs: RissInputs | None = None,
 ) -> FilterResult:
-    """RISS/GNSS closed-loop error-state Kalman filter with RTS smoother.
+    """RISS/GNSS closed-loop error-state Kalman filter with smoother: the filter engine
+    (:func:`insgnss.filter.engine.run_engine`) with the RISS process model (:class:`RissModel`).
 
     Parameters
     ----------
@@ -762,7 +861,6 @@ def run_riss_filter(
         ``_std``; ``params`` holds per epoch the nominal ``[k, b_gz, b_ax, b_ay, s_gz]``
         followed by the Gauss-Markov parts and the turn-on parts of ``b_gz, b_ax, b_ay``.
     """
-    t_start = _time.perf_counter()
     config = FilterConfig() if config is None else config
     riss = RissConfig() if riss is None else riss
     config.validate()
@@ -773,189 +871,19 @@ def run_riss_filter(
             raise ConfigError(f"{type(m).__name__} needs extra states; with the RISS process "
                               "model the odometer is an input, not a measurement",
                               column="measurements", found=repr(m))
+        if getattr(m, "high_rate", False):
+            raise ConfigError(f"{type(m).__name__}: the RISS process model has no compiled "
+                              "high-rate path (use high_rate=False)", column="measurements",
+                              found=repr(m))
     if inputs is None:
         inputs = riss_inputs(imu, odometer, window=riss.window)
-    t = inputs.t
-    dt_imu = float(np.median(np.diff(t)))
+    dt_imu = float(np.median(np.diff(inputs.t)))
     if riss.odometer_rate is None and isinstance(odometer, pd.DataFrame) and len(odometer) > 1:
         dt_odo = float(np.median(np.diff(odometer.index.to_numpy(float))))
         if dt_odo > 1.1 * dt_imu:  # slower than the IMU: its samples are the independent ones
             riss = replace(riss, odometer_rate=1.0 / dt_odo)
-    proc = riss_process(config, riss, dt_imu)
-    lay = proc.layout
-    n, ny = lay.n, lay.ny
-    az_mode = azimuth_mode_id(riss.azimuth)
-    gmod = earth.gravity_model_id(config.gravity_model)
-    arrays = inputs.arrays()
-    m_imu = grade(config.imu_model) if isinstance(config.imu_model, str) else config.imu_model
-    gyro_psd = np.full(3, m_imu.gyro_arw**2)
-
-    st = initial_riss_state(initial)
-    par = proc.par0.copy()
-    # nominal bias parts: Gauss-Markov (row 0; decays with its correlation time, as its error
-    # model says) and turn-on (row 1); the kernel uses their sum par[1:4]
-    bparts = np.zeros((2, 3))
-    bparts[1 if lay.turn_on else 0] = par[1:4]
-    bdecay = proc.decay[5:8]
-    riss_velocity(st, inputs.v_od[0] / (1.0 + par[0]))
-    ep_idx, events = _epochs(t, measurements, config.epoch_interval, dt_imu)
-    n_ep = ep_idx.size
-    n_rows = t.size
-    out_st = np.empty((n_rows, 9))
-    out_aux = np.zeros((n_rows, 9))
-    out_st[0] = st
-    out_aux[0] = [0.0, inputs.v_od[0], 0.0, earth.normal_gravity(st[ST_LAT], st[ST_H]), 0.0, 0.0,
-                  inputs.v_od[0], 0.0, 0.0]
-    Pf = np.empty((n_ep, n, n))
-    Pp = np.empty((n_ep, n, n))
-    Phis = np.empty((n_ep, n, n))
-    fb = np.zeros((n_ep, n))
-    par_ep = np.empty((n_ep, N_PAR + 6))
-    P = np.diag(proc.p0**2)
-    Pf[0] = Pp[0] = P
-    Phis[0] = np.eye(n)
-    par_ep[0] = np.concatenate([par, bparts.ravel()])
-    Phi_y = np.empty((ny, ny))
-    Q_y = np.empty((ny, ny))
-    cols = np.empty((5, 3))
-    gate_cache: dict = {}
-    streak: dict = {}
-    recoveries = []
-    log = []
-    timing = {"mechanization": 0.0, "covariance": 0.0, "updates": 0.0}
-    perf = _time.perf_counter
-    completed = 0
-    error = None
-    try:
-        for e in range(1, n_ep):
-            c0 = perf()
-            j0, j1 = int(ep_idx[e - 1]), int(ep_idx[e])
-            riss_propagate(st, par, j0, j1, *arrays, gmod, az_mode, bool(riss.coriolis),
-                           lay.y_base, lay.y_twin, proc.qc, proc.decay, proc.qdiag, Phi_y, Q_y,
-                           out_st, out_aux)
-            if np.any(bdecay > 0):
-                bparts[0] *= np.exp(-bdecay * (t[j1] - t[j0]))
-                par[1:4] = bparts[0] + bparts[1]
-            c1 = perf()
-            aux = out_aux[j1]
-            Jp, Jr, Jv, Gv = _jacobians_y(st, aux, az_mode, lay)
-            riss_dcm_col(st[ST_A], st[ST_P], st[ST_R], cols)
-            Phi, Q = transition(proc, Phi_y, Q_y, Jv, Gv, cols[:3].T)
-            P = Phi @ P @ Phi.T + Q
-            P = 0.5 * (P + P.T)
-            if config.check_health:
-                _check(P, t[j1], "prediction")
-            Pp[e] = P
-            Phis[e] = Phi
-            c2 = perf()
-            x = np.zeros(n)
-            evs = events.get(j1, ())
-            if evs:
-                seg_dur = t[j1] - t[j0]
-                dthz = np.sum(inputs.dtheta_z[j0 + 1:j1 + 1])
-                fmean = (np.array([0.0, 0.0, (dthz / seg_dur - par[1]) / (1.0 + par[4])]),
-                         np.array([0.0, 0.0, 0.0]))
-                T = virtual_map(lay, Jp, Jr, st)
-                zs, Hs, Rs = [], [], []
-                for m, row, tm in evs:
-                    nav = _nominal_state(st, par, aux, fmean, t[j1], seg_dur, gyro_psd)
-                    _extrapolate(nav, tm - t[j1])
-                    res = m.evaluate(row, nav)
-                    if res is None:
-                        continue
-                    z, Hv, R = res
-                    z = np.atleast_1d(np.asarray(z, float))
-                    R = np.atleast_2d(np.asarray(R, float))
-                    Hv = np.atleast_2d(Hv)
-                    if isinstance(m, Zaru):  # only the vertical gyro exists
-                        z, Hv, R = z[2:], Hv[2:], R[2:, 2:]
-                    H = Hv @ T
-                    S = H @ P @ H.T + R
-                    nis = kernels.nis(S, z)
-                    p_gate = m.gate_probability
-                    if p_gate is None:
-                        p_gate = config.gate_probabilities.get(m.name, config.gate_probability)
-                    thr = np.inf
-                    if p_gate:
-                        key = (p_gate, z.size)
-                        if key not in gate_cache:
-                            gate_cache[key] = float(chi2.ppf(p_gate, z.size))
-                        thr = gate_cache[key]
-                    ok = bool(nis <= thr)
-                    recovered = False
-                    if ok:
-                        streak.pop(m.name, None)
-                    elif np.isfinite(nis):
-                        t_first = streak.setdefault(m.name, tm)
-                        if config.gate_recovery is not None and tm - t_first > config.gate_recovery:
-                            P = _inflate_for(P, H, R, z, thr)
-                            S = H @ P @ H.T + R
-                            nis = kernels.nis(S, z)
-                            ok = recovered = True
-                            streak.pop(m.name, None)
-                    log.append((tm, m.name, z.size, nis, thr, ok, z, S))
-                    if recovered:
-                        recoveries.append((tm, m.name))
-                    if ok:
-                        zs.append(z)
-                        Hs.append(H)
-                        Rs.append(R)
-                if zs:
-                    z = np.concatenate(zs)
-                    H = np.vstack(Hs)
-                    R = np.zeros((z.size, z.size))
-                    i0 = 0
-                    for Rk in Rs:
-                        R[i0:i0 + Rk.shape[0], i0:i0 + Rk.shape[0]] = Rk
-                        i0 += Rk.shape[0]
-                    x, P = kf_update(x, P, z, R, H)
-                    P = 0.5 * (P + P.T)
-                    if config.check_health:
-                        _check(P, t[j1], "update")
-                    _feedback(st, par, bparts, x, lay, Jp, Jr)
-                    out_st[j1] = st
-            fb[e] = x
-            Pf[e] = P
-            par_ep[e] = np.concatenate([par, bparts.ravel()])
-            completed = e
-            timing["mechanization"] += c1 - c0
-            timing["covariance"] += c2 - c1
-            timing["updates"] += perf() - c2
-    except FilterHealthError as exc:
-        error = exc
-    n_ok = completed + 1
-    rows = int(ep_idx[completed]) + 1
-    seg = np.searchsorted(ep_idx, np.arange(rows), side="left").astype(np.int64)
-    is_ep = np.zeros(rows, np.bool_)
-    is_ep[ep_idx[:n_ok]] = True
-    ep_t = t[ep_idx[:n_ok]]
-    c0 = perf()
-    zeros = np.zeros((n_ok, n))
-    forward = _assemble(t[:rows], out_st, out_aux, seg, is_ep, ep_t, Pf[:n_ok], Pp[:n_ok], zeros,
-                        zeros, par_ep, proc)
-    timing["output"] = perf() - c0
-    smoothed, Ps = None, None
-    timing["smoother"] = 0.0
-    if config.smoother and n_ok >= 2:
-        c0 = perf()
-        xs_plus, xs_minus, Ps = rts_error_state(Pf[:n_ok], Pp[:n_ok], Phis[:n_ok], fb[:n_ok])
-        smoothed = _assemble(t[:rows], out_st, out_aux, seg, is_ep, ep_t, Ps, Ps, xs_plus,
-                             xs_minus, par_ep, proc)
-        timing["smoother"] = perf() - c0
-    innovations, rejected = innovation_tables(log, recoveries)
-    timing["total"] = perf() - t_start
-    s_end = out_st[rows - 1]
-    riss_dcm_col(s_end[ST_A], s_end[ST_P], s_end[ST_R], cols)
-    final = NavState(s_end[ST_LAT], s_end[ST_LON], s_end[ST_H], s_end[ST_VE:ST_VU + 1].copy(),
-                     np.ascontiguousarray(cols[:3].T), float(t[rows - 1]))
-    return FilterResult(
-        forward=forward, smoothed=smoothed, innovations=innovations, rejected=rejected,
-        complete=error is None, timing=timing, layout=lay, epoch_times=ep_t.copy(),
-        P_filtered=Pf[:n_ok], P_predicted=Pp[:n_ok], feedback=fb[:n_ok], P_smoothed=Ps,
-        error=error, final=final, params=par_ep[:n_ok])
-
-
-
+    model = RissModel(inputs, initial, config, riss, riss_process(config, riss, dt_imu))
+    return run_engine(model, measurements, config)
 
 
 def _assemble(t, out_st, out_aux, seg, is_ep, ep_t, P_start, P_end, X_start, X_end, par_ep,

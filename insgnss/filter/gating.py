@@ -1,0 +1,150 @@
+"""Innovation gating and gate recovery of the filter engine (one implementation, used by the
+Python update path and by the compiled high-rate path alike).
+
+Gate
+----
+A measurement with innovation ``z`` (the predicted error state is zero after the closed-loop
+reset, so the innovation equals ``z``) and innovation covariance ``S = H P H^T + R`` has the
+normalized innovation squared ``NIS = z^T S^-1 z``, chi-square distributed with ``dof =
+len(z)`` degrees of freedom for a consistent filter. It is accepted when ``NIS <= chi2.ppf(p,
+dof)`` (:func:`insgnss.stats.chi2_ppf`); ``p`` is the measurement's ``gate_probability``, else
+the per-type value of the configuration, else its default; ``None`` or 0 disables the gate.
+
+Gate recovery
+-------------
+When every measurement of one type has been rejected for longer than ``recovery`` seconds (an
+unbroken run of at least 3 rejections, with no gap longer than ``recovery`` between two of them),
+the covariance is taken to be wrong, not the measurements: the navigation block of ``P``
+(the process model's leading ``n_nav`` states) is inflated by factors of 2 until the
+measurement sits at half its gate, and it is applied (logged ``recovered``). A gap longer than
+the recovery time without rejections (e.g. between two stops for ZUPT) starts a new streak, so
+sparse measurements are not force-applied.
+
+The streak state of all measurement types is one array ``streak[type] = (first, last, count)``
+(``count = 0``: no streak), so both update paths share it.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+from ..stats import chi2_ppf
+
+__all__ = ["GateTable", "gate_step", "inflate_for", "nis", "ACCEPT", "REJECT", "RECOVER"]
+
+REJECT, ACCEPT, RECOVER = 0, 1, 2
+
+
+class GateTable:
+    """Chi-square thresholds per (probability, dof), computed once and cached."""
+
+    def __init__(self, default: float | None, per_type: dict | None = None):
+        self.default = default
+        self.per_type = dict(per_type or {})
+        self._cache: dict = {}
+
+    def probability(self, m) -> float | None:
+        """Gating probability of measurement model ``m`` (its own, per type, or default)."""
+        p = getattr(m, "gate_probability", None)
+        if p is None:
+            p = self.per_type.get(m.name, self.default)
+        return p
+
+    def threshold(self, p: float | None, dof: int) -> float:
+        """``chi2.ppf(p, dof)``; ``inf`` when gating is disabled (``p`` None or 0)."""
+        if not p:
+            return np.inf
+        key = (p, dof)
+        thr = self._cache.get(key)
+        if thr is None:
+            thr = self._cache[key] = float(chi2_ppf(p, dof))
+        return thr
+
+
+@njit(cache=True)
+def nis(S, y):
+    """Normalised innovation squared ``y^T S^-1 y`` by Cholesky; NaN if S is not PD."""
+    m = y.shape[0]
+    L = np.zeros((m, m))
+    for i in range(m):
+        for k in range(i + 1):
+            v = S[i, k]
+            for q in range(k):
+                v -= L[i, q] * L[k, q]
+            if i == k:
+                if not v > 0.0:
+                    return np.nan
+                L[i, i] = np.sqrt(v)
+            else:
+                L[i, k] = v / L[k, k]
+    w = np.empty(m)
+    out = 0.0
+    for i in range(m):
+        v = y[i]
+        for q in range(i):
+            v -= L[i, q] * w[q]
+        w[i] = v / L[i, i]
+        out += w[i] * w[i]
+    return out
+
+
+@njit(cache=True)
+def gate_step(streak, tid, time, nis_value, thr, recovery):
+    """Gate decision for one measurement of type ``tid`` at ``time``.
+
+    Returns ``ACCEPT`` (NIS inside the gate; ends the type's rejection streak), ``REJECT`` or
+    ``RECOVER`` (the streak is older than ``recovery`` seconds: inflate P and apply; the streak
+    ends). ``recovery < 0`` disables recovery. NaN NIS (S not positive definite) is rejected
+    without starting a streak.
+    """
+    if nis_value <= thr:
+        streak[tid, 2] = 0.0
+        return ACCEPT
+    if not np.isfinite(nis_value):
+        return REJECT
+    if streak[tid, 2] == 0.0 or (recovery >= 0.0 and time - streak[tid, 1] > recovery):
+        streak[tid, 0] = time
+        streak[tid, 2] = 0.0
+    streak[tid, 1] = time
+    streak[tid, 2] += 1.0
+    if recovery >= 0.0 and streak[tid, 2] >= 3.0 and time - streak[tid, 0] > recovery:
+        streak[tid, 2] = 0.0
+        return RECOVER
+    return REJECT
+
+
+@njit(cache=True)
+def inflate_for(P, H, R, z, thr, n_nav):
+    """Scale the navigation block (states ``0 .. n_nav-1``) of ``P`` in place by factors of 2
+    (rows and columns by sqrt 2) until ``z`` has NIS <= thr / 2 (at most 60 times; nothing if
+    ``H`` does not see the navigation states). Returns the final ``S = H P H^T + R``."""
+    m, n = H.shape
+    seen = False
+    for i in range(m):
+        for k in range(n_nav):
+            if H[i, k] != 0.0:
+                seen = True
+    HP = np.empty((m, n))
+    S = np.empty((m, m))
+    r2 = np.sqrt(2.0)
+    for it in range(61):
+        for i in range(m):
+            for k in range(n):
+                v = 0.0
+                for q in range(n):
+                    v += H[i, q] * P[q, k]
+                HP[i, k] = v
+        for i in range(m):
+            for k in range(m):
+                v = R[i, k]
+                for q in range(n):
+                    v += HP[i, q] * H[k, q]
+                S[i, k] = v
+        if it == 60 or not seen or nis(S, z) <= 0.5 * thr:
+            break
+        for i in range(n_nav):
+            for k in range(n):
+                P[i, k] *= r2
+                P[k, i] *= r2
+    return S

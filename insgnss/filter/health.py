@@ -1,0 +1,131 @@
+"""Health checks of the filter engine: non-finite state, covariance not positive definite,
+runaway normalized innovations (one implementation for the Python and compiled update paths).
+
+Runaway NIS: for one measurement type, the median normalized innovation ``NIS / dof`` (before
+gating, so rejected measurements count) over the last ``window`` seconds must not exceed
+``bound`` once the window holds at least ``min_count`` measurements. A consistent filter has a
+median ``NIS / dof`` below 1 (about 0.45-0.8 for 1-3 dof); a median beyond 25 means the
+measurements sit 5 sigma away most of the time: the filter diverged or its noise model is badly
+wrong, and its solution should not be trusted silently. The median is evaluated at most once per
+second per type.
+
+The Python wrappers raise :class:`insgnss.errors.FilterHealthError`; the engine catches it and
+returns what was computed up to the last good epoch.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+from ..errors import FilterHealthError
+
+__all__ = ["check_covariance", "is_positive_definite", "RunawayNis"]
+
+
+@njit(cache=True)
+def is_positive_definite(P):
+    """True if the symmetric matrix P has a Cholesky factorisation (all pivots > 0)."""
+    n = P.shape[0]
+    L = np.empty((n, n))
+    for i in range(n):
+        for k in range(i + 1):
+            v = P[i, k]
+            for q in range(k):
+                v -= L[i, q] * L[k, q]
+            if i == k:
+                if not v > 0.0:
+                    return False
+                L[i, i] = np.sqrt(v)
+            else:
+                L[i, k] = v / L[k, k]
+    return True
+
+
+def check_covariance(x, P, time: float, what: str, full: bool = True) -> None:
+    """Raise FilterHealthError if ``x`` or ``P`` is non-finite or (``full``) ``P`` is not
+    positive definite."""
+    if not np.isfinite(x.sum() + P.sum()):
+        raise FilterHealthError(f"filter state became non-finite at t = {time:.6f} s ({what})",
+                                found="NaN/inf in x or P")
+    if full and not is_positive_definite(P):
+        raise FilterHealthError(
+            f"covariance is not positive definite at t = {time:.6f} s ({what})",
+            found="Cholesky factorisation failed")
+
+
+def nominal_error(time: float) -> FilterHealthError:
+    """The error raised when the nominal state (mechanization) became non-finite."""
+    return FilterHealthError(
+        f"nominal state became non-finite at t = {time:.6f} s (mechanization; non-finite IMU "
+        "data?)", found="NaN/inf in position/velocity/attitude")
+
+
+@njit(cache=True)
+def runaway_push(buf_t, buf_v, state, tid, time, nnis, window, min_count, bound, scratch):
+    """Record one normalized NIS of type ``tid``; return the window median if it exceeds
+    ``bound`` (the check runs at most once per second per type), else -1.
+
+    ``buf_t, buf_v`` (types, capacity): ring buffers of (time, NIS/dof); ``state`` (types, 3):
+    (head, count, time of the last check). Values older than ``window`` are dropped; a full
+    buffer drops its oldest value (the capacity is sized for the densest window).
+    """
+    cap = buf_t.shape[1]
+    head = int(state[tid, 0])
+    cnt = int(state[tid, 1])
+    if not np.isfinite(nnis):
+        nnis = np.inf
+    # drop values older than the window (and the oldest if full)
+    while cnt > 0 and (buf_t[tid, head] < time - window or cnt == cap):
+        head = (head + 1) % cap
+        cnt -= 1
+    k = (head + cnt) % cap
+    buf_t[tid, k] = time
+    buf_v[tid, k] = nnis
+    cnt += 1
+    state[tid, 0] = head
+    state[tid, 1] = cnt
+    if cnt < min_count or time - state[tid, 2] < 1.0:
+        return -1.0
+    state[tid, 2] = time
+    for i in range(cnt):
+        scratch[i] = buf_v[tid, (head + i) % cap]
+    med = np.median(scratch[:cnt])
+    if med > bound:
+        return med
+    return -1.0
+
+
+class RunawayNis:
+    """Runaway-NIS monitor of all measurement types (module docstring); ``window=None``
+    disables it."""
+
+    def __init__(self, n_types: int, window: float | None, bound: float, min_count: int,
+                 capacity: int = 64):
+        self.enabled = window is not None
+        self.window = float(window) if window is not None else np.inf
+        self.bound = float(bound)
+        self.min_count = int(min_count)
+        cap = max(int(capacity), self.min_count, 2)
+        self.buf_t = np.zeros((max(n_types, 1), cap))
+        self.buf_v = np.zeros((max(n_types, 1), cap))
+        self.state = np.zeros((max(n_types, 1), 3))
+        self.state[:, 2] = -np.inf
+        self.scratch = np.empty(cap)
+
+    def push(self, tid: int, name: str, time: float, nnis: float) -> None:
+        """Record one value; raise FilterHealthError when the median runs away."""
+        if not self.enabled:
+            return
+        med = runaway_push(self.buf_t, self.buf_v, self.state, tid, time, nnis, self.window,
+                           self.min_count, self.bound, self.scratch)
+        if med >= 0.0:
+            raise self.error(tid, name, time, med)
+
+    def error(self, tid: int, name: str, time: float, med: float) -> FilterHealthError:
+        """The error for a runaway median ``med`` of type ``tid`` (``name``) at ``time``."""
+        return FilterHealthError(
+            f"runaway NIS at t = {time:.6f} s: the median NIS/dof of the {name!r} measurements over "
+            f"the last {self.window:g} s is {med:.4g} (filter diverged or measurement noise "
+            "far too small)", column=name, expected=f"a median NIS/dof <= {self.bound:g}",
+            found=f"{med:.4g} over {int(self.state[tid, 1])} measurements")

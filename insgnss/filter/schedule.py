@@ -1,0 +1,156 @@
+"""Epoch schedule of the filter engine.
+
+Filter *epochs* are the times of the measurements handled by the Python update path plus a grid
+every ``epoch_interval`` seconds (so that the stored covariances and the smoother have nodes
+during long outages) and the last IMU time. How a measurement time becomes an epoch depends on
+the process model:
+
+- ``split=True`` (strapdown): times closer than ``tol`` to an IMU sample are moved onto it, the
+  others stay between samples (the mechanization splits that IMU interval); epochs closer than
+  ``tol`` are merged;
+- ``split=False`` (RISS, whose inputs are window averages at the samples): the epoch is the IMU
+  sample at or before the measurement time (measurements more than two IMU intervals after the
+  last sample at or before them are dropped), the grid is every ``round(epoch_interval / dt)``
+  samples, and the measurement sees the nominal extrapolated to its own time.
+
+High-rate measurements (the compiled path, :mod:`.highrate`) are events at the IMU sample
+nearest their time; a segment between two epochs that contains one is run sample by sample in
+compiled code (a *dense* segment: every IMU sample there is a smoother node).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+__all__ = ["Schedule", "build_schedule"]
+
+
+@dataclass
+class Schedule:
+    """Epochs and events.
+
+    Attributes
+    ----------
+    epochs : (E,) array
+        Epoch times.
+    ev_m, ev_r, ev_t : (K,) arrays
+        Measurement index, row in that measurement and time of each Python-path event, sorted
+        by epoch (then measurement, then row).
+    ptr : (E + 1,) array
+        Events of epoch ``e`` are ``ptr[e] .. ptr[e+1]-1``.
+    hr_ptr : (N + 1,) array
+        High-rate events at IMU sample ``j`` are ``hr_ptr[j] .. hr_ptr[j+1]-1`` of
+        ``hr_m`` (high-rate measurement index) and ``hr_r`` (its row).
+    dense : (E,) bool array
+        Segment ``(epochs[e-1], epochs[e]]`` holds high-rate events.
+    dense_samples : int
+        IMU samples inside dense segments (their nodes).
+    """
+
+    epochs: np.ndarray
+    ev_m: np.ndarray
+    ev_r: np.ndarray
+    ev_t: np.ndarray
+    ptr: np.ndarray
+    hr_ptr: np.ndarray
+    hr_m: np.ndarray
+    hr_r: np.ndarray
+    dense: np.ndarray
+    dense_samples: int
+
+    @property
+    def n_epochs(self) -> int:
+        return self.epochs.size
+
+
+def _snap(t, x, tol):
+    """Move the times ``x`` onto the nearest IMU sample when closer than ``tol``."""
+    j = np.clip(np.searchsorted(t, x), 1, t.size - 1)
+    near = np.where(np.abs(t[j] - x) < np.abs(t[j - 1] - x), j, j - 1)
+    return np.where(np.abs(t[near] - x) <= tol, t[near], x)
+
+
+def _split_epochs(t, times, epoch_interval, tol):
+    t0, t1 = t[0], t[-1]
+    evs = []
+    for k, tm in enumerate(times):
+        rows = np.nonzero((tm >= t0 - tol) & (tm <= t1 + tol))[0]
+        evs.append((np.full(rows.size, k), rows, _snap(t, np.clip(tm[rows], t0, t1), tol)))
+    n_grid = int(np.floor((t1 - t0) / epoch_interval + 1e-9))
+    grid = _snap(t, np.append(t0 + epoch_interval * np.arange(n_grid + 1), t1), tol)
+    ev_m, ev_r, ev_t = _cat(evs)
+    ep = np.unique(np.concatenate([grid, ev_t]))
+    ep = ep[np.concatenate([[True], np.diff(ep) > tol])]  # merge epochs closer than tol
+    ev_e = np.clip(np.searchsorted(ep, ev_t - tol), 0, ep.size - 1)
+    return ep, ev_e, ev_m, ev_r, ep[ev_e]  # the event is at its (merged) epoch
+
+
+def _sample_epochs(t, times, epoch_interval):
+    dt = float(np.median(np.diff(t)))
+    evs = []
+    for k, tm in enumerate(times):
+        idx = np.searchsorted(t, tm + 1e-9, side="right") - 1
+        rows = np.nonzero((idx >= 1) & (tm - t[np.maximum(idx, 0)] < 2.0 * dt))[0]
+        evs.append((np.full(rows.size, k), rows, tm[rows]))
+    ev_m, ev_r, ev_t = _cat(evs)
+    ev_j = np.searchsorted(t, ev_t + 1e-9, side="right") - 1
+    step = max(int(round(epoch_interval / dt)), 1)
+    idx = np.union1d(np.arange(0, t.size, step), ev_j)
+    if idx[-1] != t.size - 1:
+        idx = np.append(idx, t.size - 1)
+    ev_e = np.searchsorted(idx, ev_j)
+    return t[idx], ev_e, ev_m, ev_r, ev_t
+
+
+def _cat(evs):
+    if not evs:
+        return np.empty(0, np.int64), np.empty(0, np.int64), np.empty(0)
+    return (np.concatenate([e[0] for e in evs]).astype(np.int64),
+            np.concatenate([e[1] for e in evs]).astype(np.int64),
+            np.concatenate([e[2] for e in evs]).astype(float))
+
+
+def build_schedule(t: np.ndarray, times: list, epoch_interval: float, tol: float,
+                   split: bool = True, high_rate_times: list | None = None) -> Schedule:
+    """Epoch schedule for IMU times ``t``, the epoch times of the Python-path measurements
+    (``times``, one array per measurement) and of the high-rate ones (module docstring)."""
+    times = [np.asarray(x, float) for x in times]
+    if split:
+        ep, ev_e, ev_m, ev_r, ev_t = _split_epochs(t, times, epoch_interval, tol)
+    else:
+        ep, ev_e, ev_m, ev_r, ev_t = _sample_epochs(t, times, epoch_interval)
+    order = np.lexsort((ev_r, ev_m, ev_e))
+    ev_e, ev_m, ev_r, ev_t = ev_e[order], ev_m[order], ev_r[order], ev_t[order]
+    ptr = np.searchsorted(ev_e, np.arange(ep.size + 1))
+    # high-rate events at the nearest IMU sample (row 0 is the initial state: never an event)
+    hj, hm, hr = [], [], []
+    for k, tm in enumerate(high_rate_times or []):
+        tm = np.asarray(tm, float)
+        rows = np.nonzero((tm > t[0] - tol) & (tm <= t[-1] + tol))[0]
+        j = np.clip(np.searchsorted(t, tm[rows]), 1, t.size - 1)
+        j = np.where(np.abs(t[j] - tm[rows]) <= np.abs(t[j - 1] - tm[rows]), j, j - 1)
+        keep = j >= 1
+        hj.append(j[keep])
+        hm.append(np.full(int(keep.sum()), k))
+        hr.append(rows[keep])
+    if hj:
+        hj_a = np.concatenate(hj).astype(np.int64)
+        hm_a = np.concatenate(hm).astype(np.int64)
+        hr_a = np.concatenate(hr).astype(np.int64)
+        o = np.lexsort((hr_a, hm_a, hj_a))
+        hj_a, hm_a, hr_a = hj_a[o], hm_a[o], hr_a[o]
+    else:
+        hj_a = hm_a = hr_a = np.empty(0, np.int64)
+    hr_ptr = np.searchsorted(hj_a, np.arange(t.size + 1)).astype(np.int64)
+    dense = np.zeros(ep.size, bool)
+    n_dense = 0
+    if hj_a.size:
+        # segment e holds samples with epochs[e-1] < t_j <= epochs[e]
+        seg = np.searchsorted(ep, t[hj_a], side="left")
+        dense[np.unique(seg[(seg >= 1) & (seg < ep.size)])] = True
+        lo = np.searchsorted(t, ep[:-1], side="right")
+        hi = np.searchsorted(t, ep[1:], side="right")
+        n_dense = int(np.sum((hi - lo)[dense[1:]]))
+    return Schedule(ep, ev_m, ev_r, ev_t, ptr, hr_ptr, hm_a, hr_a, dense, n_dense)

@@ -1,0 +1,283 @@
+"""LLF (ENU) strapdown INS as a process model of the filter engine.
+
+The nominal state is the strapdown mechanization (:func:`insgnss.mechanization.strapdown.
+strapdown_step`) of the IMU increments compensated with the nominal bias and scale-factor
+estimates; the error state and its continuous dynamics are those of :mod:`.models`
+(position, velocity, attitude misalignment, biases, optional scale factors and augmenting extra
+states, all "nominal minus true").
+
+Propagation over an interval (:meth:`StrapdownModel.propagate`):
+
+1. :func:`.kernels.propagate_nominal` (numba) mechanizes over the IMU samples up to ``t_end``,
+   stores the nominal at the IMU rate and integrates ``F`` and the noise over covariance
+   sub-intervals of ``propagation_interval`` seconds. An IMU interval that straddles ``t_end``
+   is split (linear share of its increments).
+2. :func:`.kernels.discretize` (numba) turns each sub-interval into ``Phi, Qd`` (second order
+   or van Loan) and composes them over the interval (exactly what propagating P over every
+   sub-interval in turn would give).
+
+Feedback: ``lat, lon, h`` from the ENU position error, ``v <- v - dv``, ``C <- exp(-[phi x]) C``
+and the parameters ``p <- p - dp`` (:func:`.kernels.apply_feedback`). A Gauss-Markov parameter's
+nominal follows its mean between epochs (``b' = -b / tau``).
+
+The compiled high-rate path (:mod:`.highrate`) advances the same nominal arrays sample by sample
+(:meth:`StrapdownModel.high_rate_args`).
+"""
+
+from __future__ import annotations
+
+import time as _time
+
+import numpy as np
+import pandas as pd
+
+from .. import earth
+from ..errors import InvalidValueError
+from ..imu import coning_sculling, grade, increments
+from ..mechanization.strapdown import NAV_COLS, NavState, attitude_update_id
+from . import kernels
+from .measurements import NominalState
+from .models import StateLayout, process_model
+from .process import ProcessModelBase
+
+__all__ = ["StrapdownModel", "STD_COLS", "output_columns", "levelling_covariance",
+           "DISCRETIZATIONS"]
+
+STD_COLS = ["east_std", "north_std", "up_std", "vel_e_std", "vel_n_std", "vel_u_std",
+            "roll_std", "pitch_std", "heading_std"]
+DISCRETIZATIONS = {"second_order": kernels.DISC_SECOND_ORDER, "vanloan": kernels.DISC_VANLOAN}
+
+#: compiled high-rate path: model id of this nominal representation (see :mod:`.highrate`)
+MODEL_LLF = 0
+
+
+def output_columns(layout: StateLayout) -> list[str]:
+    """Columns of the IMU-rate tables: NAV_COLS, STD_COLS, parameter values, their stds."""
+    par = layout.labels[9:]
+    return list(NAV_COLS) + STD_COLS + par + [f"{c}_std" for c in par]
+
+
+def levelling_covariance(P, C, att: slice, accel_bias: slice, g: float) -> np.ndarray:
+    """``P`` with the tilt / horizontal accelerometer-bias correlation of a levelled start.
+
+    Levelling sets ``C`` so that ``C^T (0, 0, g) = f_mean``; with an accelerometer bias error
+    ``db`` (nominal minus true) the misalignment is ``phi x g^l = C db``, i.e. ``phi = J db`` with
+    ``J = [[0, -1, 0], [1, 0, 0], [0, 0, 0]] C / g``. Adds ``J P_b J^T`` to the attitude block
+    and ``J P_b`` as the cross-covariance (errors "nominal minus true", ``C = (I + [phi x])
+    C_true``).
+    """
+    P = P.copy()
+    J = np.array([[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 0.0]]) @ C / g
+    Pb = P[accel_bias, accel_bias]
+    cross = J @ Pb
+    P[att, att] += cross @ J.T
+    P[att, accel_bias] = cross
+    P[accel_bias, att] = cross.T
+    return P
+
+
+class StrapdownModel(ProcessModelBase):
+    """LLF strapdown process model (module docstring).
+
+    Parameters
+    ----------
+    imu : DataFrame
+        IMU table (rates or increments) indexed by time [s]; its first row is the epoch of
+        ``initial``.
+    initial : NavState
+    extras : list of ExtraState
+        Augmenting states requested by the measurement models.
+    config : FilterConfig
+        IMU and bias models, initial stds, scale factors, mechanization and discretisation
+        options (:class:`insgnss.filter.engine.FilterConfig`).
+    """
+
+    n_nav = 9
+    split = True
+    high_rate = True
+
+    def __init__(self, imu: pd.DataFrame, initial: NavState, extras, config):
+        t, dth, dv = increments(imu)
+        self._setup(t, dth, dv, initial, extras, config)
+
+    @classmethod
+    def from_increments(cls, t, dth, dv, initial: NavState, extras, config) -> StrapdownModel:
+        """The model on increment arrays (``t`` (N,), ``dth``, ``dv`` (N, 3) over
+        ``(t[k-1], t[k]]``) instead of an IMU table."""
+        self = cls.__new__(cls)
+        self._setup(np.asarray(t, float), dth, dv, initial, extras, config)
+        return self
+
+    def _setup(self, t, dth, dv, initial, extras, config):
+        imu_model = grade(config.imu_model) if isinstance(config.imu_model, str) \
+            else config.imu_model
+        if t.size < 2:
+            raise InvalidValueError("IMU table needs at least two samples", found=t.size)
+        if not np.all(np.diff(t) > 0):
+            raise InvalidValueError("IMU times must be strictly increasing")
+        if config.coning:
+            dth, dv = coning_sculling(dth, dv)
+        self.t = t
+        self.dth = np.ascontiguousarray(dth, dtype=float)
+        self.dv = np.ascontiguousarray(dv, dtype=float)
+        self.layout = layout = StateLayout(config.scale_factors, extras)
+        pm = process_model(
+            layout, imu_model, config.bias_model, config.initial_pos_std, config.initial_vel_std,
+            config.initial_att_std, config.initial_gyro_bias_std, config.initial_accel_bias_std,
+            config.initial_gyro_scale_std, config.initial_accel_scale_std, config.gyro_bias,
+            config.accel_bias)
+        pm.dyn_noise = np.array([config.accel_dynamic_noise, config.gyro_dynamic_noise], float)
+        self.noise = pm
+        self.n_par = layout.n - 9
+        self.i_sg, self.i_sa = layout.index("gyro_scale"), layout.index("accel_scale")
+        self.method = DISCRETIZATIONS[config.discretization]
+        self.gmodel = earth.gravity_model_id(config.gravity_model)
+        self.aupd = attitude_update_id(config.attitude_update)
+        self.sub_T = float(config.propagation_interval)
+        self.levelling = bool(config.levelling_correlation)
+        self.gravity_model = config.gravity_model
+        self.pos = np.array([initial.lat, initial.lon, initial.height], float)
+        self.vel = np.array(initial.vel, float).copy()
+        self.C = np.ascontiguousarray(initial.C, dtype=float).copy()
+        self.pnom = pm.initial_values.copy()
+        self.par_decay = pm.decay[9:].copy()
+        self.has_decay = bool(np.any(self.par_decay > 0))
+        self.j, self.frac = 1, 0.0
+        self.rates = np.zeros((4, 3))
+        self.seg_dur = 0.0
+        self.t_last = float(t[0])
+        self.timing = {"mechanization": 0.0, "covariance": 0.0}
+        self._nav = NominalState()
+        self._nav.layout = layout
+        self._nav.gyro_psd = pm.gyro_psd
+        self._nav_time = None
+
+    # --- engine calls -------------------------------------------------------------------------
+    def prepare(self, epochs: np.ndarray) -> None:
+        """Allocate the output table and the propagation buffers for the epoch schedule."""
+        t = self.t
+        n = self.layout.n
+        self.table = np.empty((t.size, len(output_columns(self.layout))))
+        self.seg = np.zeros(t.size, np.int64)
+        self.post = np.zeros(t.size, np.bool_)
+        max_gap = float(np.max(np.diff(epochs))) if epochs.size > 1 else 0.0
+        max_sub = min(int(np.ceil(max_gap / self.sub_T)),
+                      int(np.ceil(max_gap / np.min(np.diff(t))))) + 3
+        self.Fint = np.zeros((max_sub, n, n))
+        self.Qint = np.zeros((max_sub, 2, 3, 3))
+        self.sub_dt = np.zeros(max_sub)
+        self.Phi = np.eye(n)
+        self.Qd = np.zeros((n, n))
+        kernels.store_nav(self.table, 0, self.pos, self.vel, self.C)
+        self.seg[0], self.post[0] = 0, True
+
+    def initial_covariance(self) -> np.ndarray:
+        P = np.diag(self.noise.p0**2)
+        if self.levelling:
+            g = earth.normal_gravity(self.pos[0], self.pos[2], self.gravity_model)
+            P = levelling_covariance(P, self.C, self.layout["att"], self.layout["accel_bias"], g)
+        return P
+
+    def propagate(self, t_end: float, node: int):
+        perf = _time.perf_counter
+        c0 = perf()
+        pm = self.noise
+        self.j, self.frac, n_sub = kernels.propagate_nominal(
+            self.t, self.dth, self.dv, self.j, self.frac, t_end, self.pos, self.vel, self.C,
+            self.pnom, self.i_sg, self.i_sa, self.gmodel, self.aupd, self.sub_T, self.Fint,
+            self.Qint, self.sub_dt, pm.gyro_psd, pm.accel_psd, self.table, self.seg, node,
+            self.rates, pm.dyn_noise)
+        dur = t_end - self.t_last
+        if self.has_decay:
+            # the nominal of a Gauss-Markov parameter follows its mean, b' = -b / tau
+            self.pnom *= np.exp(-self.par_decay * dur)
+        self.seg_dur = dur
+        self.t_last = t_end
+        c1 = perf()
+        kernels.discretize(self.Fint, self.Qint, self.sub_dt, n_sub, pm.decay, pm.qdiag,
+                           self.method, self.Phi, self.Qd, pm.Fx, pm.Qx)
+        self.timing["mechanization"] += c1 - c0
+        self.timing["covariance"] += perf() - c1
+        return self.Phi, self.Qd
+
+    def advance_to(self, t_last: float) -> None:
+        """The compiled high-rate path moved the nominal to its node at ``t_last``."""
+        self.t_last = t_last
+        self._nav_time = None
+
+    def nominal_finite(self) -> bool:
+        return bool(np.isfinite(self.pos.sum() + self.vel.sum() + self.C.sum()))
+
+    def nominal(self, time: float) -> NominalState:
+        nav = self._nav
+        if self._nav_time == time:
+            return nav
+        pos, rates = self.pos, self.rates
+        nav.time = time
+        nav.lat, nav.lon, nav.height = pos[0], pos[1], pos[2]
+        nav.vel, nav.C = self.vel, self.C
+        nav.omega_ib, nav.omega_ib_mean = rates[0], rates[1]
+        nav.f_ib, nav.f_ib_mean = rates[2], rates[3]
+        nav.segment_duration = self.seg_dur
+        nav.params = self.pnom
+        nav.M, nav.N = earth.radii(pos[0])
+        self._nav_time = time
+        return nav
+
+    def feedback(self, x: np.ndarray) -> None:
+        kernels.apply_feedback(self.pos, self.vel, self.C, self.pnom, x)
+        self._nav_time = None
+
+    def params(self) -> np.ndarray:
+        return self.pnom
+
+    def close_epoch(self, node: int, time: float) -> None:
+        # the IMU sample that sits on this epoch holds the post-feedback state
+        j = self.j
+        if self.frac == 0.0 and self.t[j - 1] == time:
+            kernels.store_nav(self.table, j - 1, self.pos, self.vel, self.C)
+            self.seg[j - 1], self.post[j - 1] = node, True
+        self._nav_time = None
+
+    def output(self, store, n_nodes: int, n_rows: int, smoothed=None) -> pd.DataFrame:
+        """IMU-rate forward table (``smoothed=None``: completes the stored nominal table in
+        place) or smoothed table (``(xs_plus, xs_minus, Ps or None)``: a new table; the
+        smoothed std columns are NaN without smoothed covariances)."""
+        cols = output_columns(self.layout)
+        t = self.t
+        if smoothed is None:
+            out = self.table
+            if n_rows:
+                X = np.zeros((1, self.layout.n))  # unused: no correction
+                kernels.assemble_output(t, self.table, self.seg, self.post, store.t, store.Pf,
+                                        store.Pp, X, X, store.par, n_rows, False, out)
+        else:
+            out = np.empty((n_rows, len(cols)))
+            if n_rows:
+                xs_plus, xs_minus, Ps = smoothed
+                P = store.Pf if Ps is None else Ps
+                kernels.assemble_output(t, self.table, self.seg, self.post, store.t, P, P,
+                                        xs_plus, xs_minus, store.par, n_rows, True, out)
+                if Ps is None:
+                    out[:, 9:18] = np.nan
+                    out[:, 18 + self.n_par:] = np.nan
+        return pd.DataFrame(out[:n_rows], index=pd.Index(t[:n_rows], name="time"), columns=cols,
+                            copy=False)
+
+    def final_state(self, time: float) -> NavState:
+        return NavState(self.pos[0], self.pos[1], self.pos[2], self.vel.copy(), self.C.copy(),
+                        float(time))
+
+    def high_rate_args(self):
+        """``(model id, t, dth, dv, pos, vel, C, pnom, i_sg, i_sa, gravity model, attitude
+        update, gyro PSD, accel PSD, dynamic noise, decay, qdiag, Fx, Qx, table, seg, post,
+        rates)``
+        for :func:`insgnss.filter.highrate.dense_segment`."""
+        pm = self.noise
+        n = self.layout.n
+        Fx = pm.Fx if pm.Fx is not None else np.zeros((0, n))
+        Qx = pm.Qx if pm.Qx is not None else np.zeros((0, n))
+        return (MODEL_LLF, self.t, self.dth, self.dv, self.pos, self.vel, self.C, self.pnom,
+                self.i_sg, self.i_sa, self.gmodel, self.aupd, pm.gyro_psd, pm.accel_psd,
+                pm.dyn_noise, pm.decay, pm.qdiag, Fx, Qx, self.table, self.seg, self.post,
+                self.rates)
