@@ -15,7 +15,9 @@ The nominal trajectory is the strapdown mechanization of the bias-compensated in
 
     x = [dp (ENU, m), dv (ENU, m/s), phi (l-frame misalignment, rad), dbg (rad/s), dba (m/s^2)]
 
-follows the strapdown error dynamics of :mod:`insgnss.filter.models`, propagated per IMU
+follows the short-term (pedestrian) strapdown error dynamics of :mod:`insgnss.filter.models`
+(Groves 2013 eq. 14.63 without the Earth-rate, transport-rate and gravity-gradient couplings:
+over a walk of minutes they are below 1e-4 of the retained terms), propagated per IMU
 interval (``Phi = I + F dt``) with random-walk biases and, on a foot, a dynamics-dependent white
 noise: the velocity and attitude variances of an interval grow by ``(accel_dyn_noise |C dv -
 g dt|)^2`` and ``(gyro_dyn_noise |dtheta|)^2``, a white error of a fraction of each increment
@@ -260,8 +262,9 @@ def _gate_probability(gate: float) -> float | None:
 
 
 def foot_filter_config(cfg: FootConfig, bg0, dt: float, duration: float) -> FilterConfig:
-    """The engine configuration of the foot profile: random-walk biases with the foot's
-    PSDs and initial stds, dynamics-dependent noise, the propagation at the IMU interval ``dt``
+    """The engine configuration of the foot profile: the short-term (pedestrian) error
+    dynamics, random-walk biases with the foot's PSDs and initial stds, dynamics-dependent
+    noise, the propagation at the IMU interval ``dt``
     and one epoch segment over the walk (``duration`` [s]: every sample is a node of the
     high-rate path), no runaway-NIS monitor, smoother without covariances."""
     imu_model = ImuErrorModel(gyro_arw=cfg.gyro_psd, accel_vrw=cfg.accel_psd,
@@ -276,7 +279,7 @@ def foot_filter_config(cfg: FootConfig, bg0, dt: float, duration: float) -> Filt
         initial_gyro_bias_std=cfg.init_gyro_bias_std,
         initial_accel_bias_std=cfg.init_accel_bias_std, gyro_bias=tuple(np.asarray(bg0, float)),
         gravity_model=cfg.gravity_model, smoother=cfg.smooth, smoother_covariance=False,
-        nis_window=None, accel_dynamic_noise=cfg.accel_dyn_noise,
+        nis_window=None, error_dynamics="short_term", accel_dynamic_noise=cfg.accel_dyn_noise,
         gyro_dynamic_noise=cfg.gyro_dyn_noise)
 
 
@@ -324,15 +327,17 @@ def foot_filter_arrays(t, dth, dv, gyro, still, stat, initial: NavState, bg0,
     fwd = res.forward.to_numpy()
     nav = fwd[:, :9]
     nav_s = res.smoothed.to_numpy()[:, :9] if res.smoothed is not None else nav
-    inn = res.innovations
+    log = res.log
     nu = np.full((t.size, 6), np.nan)
-    ok = inn["accepted"].to_numpy()
-    rows = np.searchsorted(t, inn["time"].to_numpy())
-    for k, name in ((0, "zupt"), (3, "zaru")):
-        sel = ok & (inn["type"].to_numpy() == name)
-        nu[rows[sel], k:k + 3] = inn.loc[sel, ["innov_0", "innov_1", "innov_2"]].to_numpy()
-    return {"nav": nav, "nav_smoothed": nav_s, "bias": res.forward[BIAS_COLS].to_numpy(),
-            "std": res.forward[STD_COLS].to_numpy(), "innovations": nu,
+    ok = log["accepted"]
+    if ok.size:
+        rows = np.searchsorted(t, log["time"])
+        for k, name in ((0, "zupt"), (3, "zaru")):
+            sel = ok & (log["tid"] == log["names"].index(name)) if name in log["names"] else \
+                np.zeros(ok.size, bool)
+            nu[rows[sel], k:k + 3] = log["innov"][sel, :3]
+    return {"nav": nav, "nav_smoothed": nav_s, "bias": fwd[:, 18:24], "std": fwd[:, 9:18],
+            "innovations": nu,
             "n_updates": int(ok.sum()), "result": res}
 
 

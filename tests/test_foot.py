@@ -15,7 +15,7 @@ from insgnss.detect import Stillness
 from insgnss.earth import geodetic_to_enu
 from insgnss.errors import AlignmentError, ConfigError
 from insgnss.filter import gating
-from insgnss.filter.highrate import _first_order_propagation, _kalman_update
+from insgnss.filter.highrate import _first_order_propagation, _innovation_cov, _kalman_update
 from insgnss.filter.models import StateLayout, error_dynamics
 from insgnss.foot import FootConfig, level, run_foot_ins
 from insgnss.imu import grade
@@ -38,9 +38,16 @@ def test_first_order_covariance_propagation_matches_dense():
     F = error_dynamics(0.8, 120.0, [3.0, -1.0, 0.2], C, rng.normal(size=3) * 5,
                        rng.normal(size=3), StateLayout()) * dt
     Qd = np.diag(rng.uniform(1e-8, 1e-6, 15))
+    Qd[3:6, 3:6] += 1e-7 * np.ones((3, 3))
     P2 = P.copy()
-    _first_order_propagation(P2, F, Qd, np.empty((15, 15)), np.empty((15, 15)),
-                             np.empty(225, np.int64), np.empty(225, np.int64), np.empty(225))
+    F[12, 12] = -dt / 300.0  # a decaying (Gauss-Markov) parameter row
+    mask = F != 0.0
+    act = np.flatnonzero(mask.any(axis=1))
+    f_ptr = np.concatenate([[0], np.cumsum(mask[act].sum(axis=1))])
+    f_col = np.concatenate([np.flatnonzero(mask[r]) for r in act])
+    q_row, q_col = np.nonzero(Qd)
+    _first_order_propagation(P2, F, Qd, f_ptr, f_col, act, q_row, q_col, np.empty((15, 15)),
+                             np.empty((15, 15)))
     Phi = np.eye(15) + F
     np.testing.assert_allclose(P2, Phi @ P @ Phi.T + Qd, rtol=0, atol=1e-12)
 
@@ -61,9 +68,11 @@ def test_compiled_update_matches_dense_kalman(blocks):
     K = P @ H.T @ np.linalg.inv(S)
     P2, x = P.copy(), np.empty(15)
     Kt, G, s = np.empty((m, 15)), np.empty((m, 15)), np.empty(m)
-    work = [np.empty((m, 15)), np.empty((m, m)), np.empty((m, m)), np.empty((m, 15)),
-            np.empty((m, 15))]
-    assert _kalman_update(P2, H, R, z, m, x, Kt, G, s, *work)
+    HP, S2 = np.empty((m, 15)), np.empty((m, m))
+    _innovation_cov(H, P, R, m, HP, S2)
+    np.testing.assert_allclose(S2, S, atol=1e-12)
+    work = [np.empty((m, m)), np.empty((m, 15)), np.empty((m, 15))]
+    assert _kalman_update(P2, H, z, m, HP, S2, x, Kt, G, s, *work, True)
     np.testing.assert_allclose(Kt.T, K, atol=1e-12)
     np.testing.assert_allclose(x, K @ z, atol=1e-12)
     I_KH = np.eye(15) - K @ H

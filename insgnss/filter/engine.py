@@ -55,7 +55,7 @@ from . import gating, health, highrate
 from .gating import GateTable
 from .health import RunawayNis, check_covariance
 from .measurements import Measurement
-from .models import BIAS_MODELS, StateLayout
+from .models import BIAS_MODELS, ERROR_DYNAMICS, StateLayout
 from .process import ProcessModelBase
 from .schedule import build_schedule
 from .smoother import smooth
@@ -143,6 +143,10 @@ class FilterConfig:
         (:func:`insgnss.policies.gap_noise`): indexed by time [s] with columns ``pos_std``
         [m], ``vel_std`` [m/s], ``att_std`` [rad] (the same on every axis); each row's variances
         are added to ``Qd`` of the propagation segment that contains its time.
+    error_dynamics : {"full", "short_term"}
+        The strapdown error model: the full LLF dynamics (:mod:`.models`) or the short-term
+        pedestrian form without Earth-rate, transport-rate and gravity-gradient couplings
+        (:func:`.models.accumulate_short_term_dynamics`; used by the foot-mounted profile).
     accel_dynamic_noise, gyro_dynamic_noise : float
         Dynamics-dependent process noise [fraction]: a white error of this fraction of each
         IMU interval's dynamic velocity increment ``|C dv - g dt|`` and angle increment
@@ -182,6 +186,7 @@ class FilterConfig:
     nis_bound: float = 25.0
     nis_min_count: int = 10
     extra_noise: pd.DataFrame | None = None
+    error_dynamics: str = "full"
     accel_dynamic_noise: float = 0.0
     gyro_dynamic_noise: float = 0.0
     smoother_covariance: bool = True
@@ -204,6 +209,9 @@ class FilterConfig:
         if not (self.nis_bound > 0):
             raise ConfigError("NIS bound must be positive", column="nis_bound",
                               found=self.nis_bound)
+        if self.error_dynamics not in ERROR_DYNAMICS:
+            raise ConfigError("unknown error_dynamics", column="error_dynamics",
+                              expected=list(ERROR_DYNAMICS), found=self.error_dynamics)
         for key in ("accel_dynamic_noise", "gyro_dynamic_noise"):
             v = getattr(self, key)
             if not (np.isfinite(v) and v >= 0):
@@ -238,12 +246,11 @@ class FilterResult:
         ``output`` and ``total``.
     layout : StateLayout
     epoch_times : (E,) array
-        Times of the smoother nodes (:mod:`.store`): the filter epochs and, in segments run by
-        the compiled high-rate path, every IMU sample.
+        Times of the smoother nodes (:mod:`.store`): the filter epochs.
     P_filtered, P_predicted : (E, n, n) arrays
         ``P(e|e)`` and ``P(e|e-1)`` at the nodes.
     Phi : (E, n, n) array
-        Error transition from node ``e-1`` to ``e``.
+        Error transition from node ``e-1`` (or the last high-rate sample before ``e``) to ``e``.
     feedback : (E, n) array
         Error estimate removed from the nominal at each node.
     P_smoothed : (E, n, n) array or None
@@ -252,8 +259,15 @@ class FilterResult:
     params : (E, p) array
         Nominal parameter values at each node (process-model specific).
     updates : dict
-        The applied updates per node (``ptr``, ``H``, ``K``, ``G = S^-1 H``, ``s = S^-1 z``;
-        :class:`insgnss.filter.store.NodeStore`).
+        The applied updates: rows ``r0[e] .. r1[e]-1`` of ``H``, ``K`` (transposed), ``G =
+        S^-1 H``, ``s = S^-1 z`` belong to node ``e`` (:class:`insgnss.filter.store.NodeStore`).
+    log : dict
+        The innovation log as arrays (``time tid dof nis threshold accepted recovered innov
+        innov_std`` and ``names``: the measurement type of each ``tid``).
+    high_rate : dict or None
+        The samples of the compiled high-rate path (times, IMU rows, ``F dt`` and ``Qd`` at the
+        process model's ``pattern``, feedback, update rows; ``seg0[e] .. seg1[e]-1`` lie
+        before node ``e``), None without high-rate measurements.
     """
 
     forward: pd.DataFrame
@@ -273,6 +287,8 @@ class FilterResult:
     params: np.ndarray | None = field(default=None, repr=False)
     Phi: np.ndarray | None = field(default=None, repr=False)
     updates: dict | None = field(default=None, repr=False)
+    high_rate: dict | None = field(default=None, repr=False)
+    log: dict | None = field(default=None, repr=False)
 
 
 class _Run:
@@ -302,8 +318,11 @@ class _Run:
                                   config.nis_bound, config.nis_min_count,
                                   _window_capacity(self, config.nis_window))
         n = model.layout.n
-        self.store = NodeStore(self.sched.n_epochs + self.sched.dense_samples, n, model.n_par)
         self.hr = highrate.HighRate(self.fast, model, self) if self.fast else None
+        pat = self.hr.pattern if self.hr is not None else None
+        self.store = NodeStore(self.sched.n_epochs, n, model.n_par, self.sched.dense_samples,
+                               0 if pat is None else pat[1].size,
+                               0 if pat is None else pat[3].size)
         if config.extra_noise is not None and len(config.extra_noise):
             self.xn_t = np.asarray(config.extra_noise.index, float)
             self.xn_var = config.extra_noise[["pos_std", "vel_std", "att_std"]].to_numpy(float) ** 2
@@ -330,10 +349,11 @@ def _window_capacity(run: _Run, window) -> int:
 
 
 def _propagate(run: _Run, e: int, node: int, x, P):
-    """Step 1: advance the nominal and the covariance from the previous node to epoch ``e``."""
+    """Step 1: advance the nominal and the covariance from the previous node to epoch ``e``
+    (through the compiled high-rate path first if the segment holds high-rate events)."""
     model, te = run.model, run.sched.epochs[e]
     if run.hr is not None and run.sched.dense[e]:
-        node, P = run.hr.segment(te, node, P)
+        P = run.hr.segment(te, P)
     Phi, Qd = model.propagate(te, node)
     if run.xn_i < run.xn_t.size and run.xn_t[run.xn_i] <= te:
         Qd = Qd.copy()
@@ -353,7 +373,7 @@ def _propagate(run: _Run, e: int, node: int, x, P):
         ptr = run.sched.ptr
         check_covariance(x, P, te, "prediction", full=ptr[e + 1] == ptr[e])
     model.timing["covariance"] += _time.perf_counter() - c0
-    return node, x, P, Phi
+    return x, P, Phi
 
 
 def _as_arrays(z, H, R):
@@ -465,11 +485,12 @@ def run_engine(model: ProcessModelBase, measurements: list[Measurement], config:
             te = sched.epochs[e]
             Phi = run.I
             if e > 0:
-                node, x, P, Phi = _propagate(run, e, node, x, P)
+                x, P, Phi = _propagate(run, e, node, x, P)
             c0 = perf()
             fb = None
+            store.open(node)
             x, P, Pp = _update(run, e, x, P) if sched.ptr[e + 1] > sched.ptr[e] else (x, P, P)
-            if store.ptr[node] < store.n_rows:  # an update was applied: feed back and reset
+            if store.r0[node] < store.n_rows:  # an update was applied: feed back and reset
                 fb = x
                 model.feedback(x)
                 x = np.zeros(n)
@@ -483,11 +504,14 @@ def run_engine(model: ProcessModelBase, measurements: list[Measurement], config:
 
 
 def _finish(run: _Run, completed: int, error, t_start: float) -> FilterResult:
-    """Smoother and output tables over the completed nodes."""
+    """Smoother and output tables over the completed nodes (and high-rate samples)."""
     model, store, config = run.model, run.store, run.config
     perf = _time.perf_counter
     n_ok = store.count
     t_last = store.t[n_ok - 1] if n_ok else model.t[0]
+    n_hr = store.hr_count
+    if n_ok and n_hr > store.seg1[n_ok - 1]:  # a run stopped inside a high-rate segment
+        t_last = store.hr_t[n_hr - 1]
     n_rows = model.rows_done(t_last) if n_ok else 0
     timing = {"mechanization": model.timing["mechanization"],
               "covariance": model.timing["covariance"], "updates": run.timing["updates"]}
@@ -500,22 +524,32 @@ def _finish(run: _Run, completed: int, error, t_start: float) -> FilterResult:
     timing["smoother"] = 0.0
     if config.smoother and n_ok >= 2:
         c0 = perf()
-        xs = smooth(store, n_ok, config.smoother_covariance)
+        xs = smooth(store, n_ok, config.smoother_covariance,
+                    run.hr.pattern if run.hr is not None else None)
         Ps = xs[2]
         smoothed = model.output(store, n_ok, n_rows, xs)
         timing["smoother"] = perf() - c0
+    log = run.log.columns()
+    log["names"] = list(run.log.names)
     innovations, rejected = innovation_tables(run.log)
     timing["total"] = perf() - t_start
-    k = store.ptr[n_ok]
-    updates = {"ptr": store.ptr[:n_ok + 1], "H": store.H[:k], "K": store.K[:k],
-               "G": store.G[:k], "s": store.s[:k]}
+    updates = {"r0": store.r0[:n_ok], "r1": store.r1[:n_ok], "H": store.H[:store.n_rows],
+               "K": store.K[:store.n_rows], "G": store.G[:store.n_rows],
+               "s": store.s[:store.n_rows]}
+    high_rate = None
+    if n_hr:
+        high_rate = {"t": store.hr_t[:n_hr], "row": store.hr_row[:n_hr],
+                     "seg0": store.seg0[:n_ok], "seg1": store.seg1[:n_ok],
+                     "F": store.hr_F[:n_hr], "Q": store.hr_Q[:n_hr],
+                     "feedback": store.hr_fb[:n_hr], "r0": store.hr_r0[:n_hr],
+                     "r1": store.hr_r1[:n_hr], "pattern": run.hr.pattern}
     return FilterResult(
         forward=forward, smoothed=smoothed, innovations=innovations, rejected=rejected,
         complete=error is None, timing=timing, layout=model.layout,
         epoch_times=store.t[:n_ok].copy(), P_filtered=store.Pf[:n_ok],
         P_predicted=store.Pp[:n_ok], feedback=store.fb[:n_ok], P_smoothed=Ps, error=error,
         final=model.final_state(float(t_last)), params=store.par[:n_ok], Phi=store.Phi[:n_ok],
-        updates=updates)
+        updates=updates, high_rate=high_rate, log=log)
 
 
 def run_filter(

@@ -31,7 +31,8 @@ from numba import njit
 
 from ..stats import chi2_ppf
 
-__all__ = ["GateTable", "gate_step", "inflate_for", "nis", "ACCEPT", "REJECT", "RECOVER"]
+__all__ = ["GateTable", "gate_step", "inflate_for", "nis", "nis_into", "ACCEPT", "REJECT",
+           "RECOVER"]
 
 REJECT, ACCEPT, RECOVER = 0, 1, 2
 
@@ -63,10 +64,10 @@ class GateTable:
 
 
 @njit(cache=True)
-def nis(S, y):
-    """Normalised innovation squared ``y^T S^-1 y`` by Cholesky; NaN if S is not PD."""
+def nis_into(S, y, L, w):
+    """Normalised innovation squared ``y^T S^-1 y`` by Cholesky (scratch ``L`` (m, m), ``w``
+    (m,) at least); NaN if S is not PD."""
     m = y.shape[0]
-    L = np.zeros((m, m))
     for i in range(m):
         for k in range(i + 1):
             v = S[i, k]
@@ -78,7 +79,6 @@ def nis(S, y):
                 L[i, i] = np.sqrt(v)
             else:
                 L[i, k] = v / L[k, k]
-    w = np.empty(m)
     out = 0.0
     for i in range(m):
         v = y[i]
@@ -87,6 +87,13 @@ def nis(S, y):
         w[i] = v / L[i, i]
         out += w[i] * w[i]
     return out
+
+
+@njit(cache=True)
+def nis(S, y):
+    """Normalised innovation squared ``y^T S^-1 y`` by Cholesky; NaN if S is not PD."""
+    m = y.shape[0]
+    return nis_into(S, y, np.empty((m, m)), np.empty(m))
 
 
 @njit(cache=True)

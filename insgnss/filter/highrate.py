@@ -47,92 +47,103 @@ from numba import njit
 from ..errors import ConfigError, FilterHealthError
 from ..mechanization.strapdown import STEP_WORK_SHAPE
 from . import gating, health
-from .kernels import apply_feedback, interval_step, store_nav
+from .kernels import _euler_std, apply_feedback_into, interval_step, store_nav
 from .measurements import Measurement, evaluate_compiled
 
 __all__ = ["HighRate", "dense_segment"]
 
-OK, NONFINITE, NOT_PD, RUNAWAY = 0, 1, 2, 3
+OK, NONFINITE, NOT_PD, RUNAWAY, RECOVERED = 0, 1, 2, 3, 4
 
 
 @njit(cache=True)
-def _model_step(model, pos, vel, C, pnom, dth_j, dv_j, a, dt_s, i_sg, i_sa, gmodel, aupd, F,
-                Qg, Qa, q_g, q_a, dyn, dthc, dvc, work):
+def _model_step(model, dynamics, pos, vel, C, pnom, dth_j, dv_j, a, dt_s, i_sg, i_sa, gmodel,
+                aupd, F, Qg, Qa, q_g, q_a, dyn, dthc, dvc, work):
     """Advance the nominal of process model ``model`` over one IMU interval, adding ``F dt``
-    and the noise integrals (model 0: LLF strapdown)."""
+    and the noise integrals (model 0: LLF strapdown with error model ``dynamics``)."""
     if model == 0:
         interval_step(pos, vel, C, pnom, dth_j, dv_j, a, dt_s, i_sg, i_sa, gmodel, aupd, F, Qg,
-                      Qa, q_g, q_a, dyn, dthc, dvc, work)
+                      Qa, q_g, q_a, dyn, dthc, dvc, work, dynamics)
 
 
 @njit(cache=True)
-def _model_feedback(model, pos, vel, C, pnom, x):
-    """Closed-loop feedback of the error estimate ``x`` into the nominal (model 0: LLF)."""
+def _model_feedback(model, pos, vel, C, pnom, x, work):
+    """Closed-loop feedback of the error estimate ``x`` into the nominal (model 0: LLF;
+    ``work`` (3, 3, 3) scratch)."""
     if model == 0:
-        apply_feedback(pos, vel, C, pnom, x)
+        apply_feedback_into(pos, vel, C, pnom, x, work)
 
 
 @njit(cache=True)
-def _first_order_propagation(P, F, Qd, A, B, ri, ci, vals):
-    """``P <- (I + F) P (I + F)^T + Qd`` using the non-zero entries of ``F`` (``F`` = F dt)."""
+def _first_order_propagation(P, F, Qd, f_ptr, f_col, f_act, q_row, q_col, A, B):
+    """``P <- (I + F) P (I + F)^T + Qd`` (``F`` = F dt) in O(nnz(F) n).
+
+    ``F`` is read at its structural non-zeros: the rows ``f_act[a]`` with the columns
+    ``f_col[f_ptr[a]:f_ptr[a+1]]`` (:meth:`.strapdown_model.StrapdownModel.f_pattern`);
+    ``Qd`` at the entries ``(q_row, q_col)``. With ``A = F[act] P``: ``B = P (I + F)^T = P +
+    A^T`` (active columns), then ``P' = B + F B`` (active rows). ``A``, ``B``: scratch.
+    """
     n = P.shape[0]
-    nnz = 0
+    na = f_act.shape[0]
+    for a in range(na):  # A = F[act] P
+        i = f_act[a]
+        for j in range(n):
+            A[a, j] = 0.0
+        for q in range(f_ptr[a], f_ptr[a + 1]):
+            c = f_col[q]
+            v = F[i, c]
+            for j in range(n):
+                A[a, j] += v * P[c, j]
     for i in range(n):
         for j in range(n):
-            v = F[i, j]
-            if v != 0.0:
-                ri[nnz] = i
-                ci[nnz] = j
-                vals[nnz] = v
-                nnz += 1
-    for i in range(n):
+            B[i, j] = P[i, j]
+    for a in range(na):
+        i = f_act[a]
         for j in range(n):
-            A[i, j] = P[i, j]
-    for q in range(nnz):  # A = P + F P
-        r, c, v = ri[q], ci[q], vals[q]
-        for j in range(n):
-            A[r, j] += v * P[c, j]
-    for i in range(n):  # B = A^T = P (I + F)^T
-        for j in range(n):
-            B[i, j] = A[j, i]
+            B[j, i] += A[a, j]
     for i in range(n):
         for j in range(n):
             P[i, j] = B[i, j]
-    for q in range(nnz):  # P = (I + F) B
-        r, c, v = ri[q], ci[q], vals[q]
-        for j in range(n):
-            P[r, j] += v * B[c, j]
-    for i in range(n):
-        for j in range(i, n):
-            v = 0.5 * (P[i, j] + P[j, i]) + Qd[i, j]
-            P[i, j] = v
-            P[j, i] = v
+    for a in range(na):
+        i = f_act[a]
+        for q in range(f_ptr[a], f_ptr[a + 1]):
+            c = f_col[q]
+            v = F[i, c]
+            for j in range(n):
+                P[i, j] += v * B[c, j]
+    for q in range(q_row.shape[0]):
+        P[q_row[q], q_col[q]] += Qd[q_row[q], q_col[q]]
 
 
 @njit(cache=True)
 def _forward_sub(L, B, m, out):
-    """``out[:m] = L^-1 B[:m]`` for lower-triangular ``L`` (m x m)."""
+    """``out[:m] = L^-1 B[:m]`` for lower-triangular ``L`` (m x m); row operations."""
     p = B.shape[1]
     for i in range(m):
-        li = L[i, i]
         for c in range(p):
-            v = B[i, c]
-            for q in range(i):
-                v -= L[i, q] * out[q, c]
-            out[i, c] = v / li
+            out[i, c] = B[i, c]
+        for q in range(i):
+            lq = L[i, q]
+            for c in range(p):
+                out[i, c] -= lq * out[q, c]
+        li = 1.0 / L[i, i]
+        for c in range(p):
+            out[i, c] *= li
 
 
 @njit(cache=True)
 def _back_sub(L, B, m, out):
-    """``out[:m] = L^-T B[:m]`` for lower-triangular ``L`` (m x m)."""
+    """``out[:m] = L^-T B[:m]`` for lower-triangular ``L`` (m x m); row operations."""
     p = B.shape[1]
     for i in range(m - 1, -1, -1):
-        li = L[i, i]
         for c in range(p):
-            v = B[i, c]
-            for q in range(i + 1, m):
-                v -= L[q, i] * out[q, c]
-            out[i, c] = v / li
+            out[i, c] = B[i, c]
+        for q in range(i + 1, m):
+            lq = L[q, i]
+            for c in range(p):
+                out[i, c] -= lq * out[q, c]
+        li = 1.0 / L[i, i]
+        for c in range(p):
+            out[i, c] *= li
 
 
 @njit(cache=True)
@@ -150,24 +161,33 @@ def _hp(H, P, m, out):
 
 
 @njit(cache=True)
-def _kalman_update(P, H, R, z, m, x, Kt, G, s, HP, S, L, W, V):
-    """Stacked Kalman update with the first ``m`` rows of ``H``, ``R``, ``z``.
-
-    With ``S = H P H^T + R = L L^T`` and ``W = L^-1 H P``: the gain (transposed)
-    ``K^T = L^-T W``, ``x = K z``, ``G = S^-1 H``, ``s = S^-1 z`` and
-    ``P <- P - K S K^T = P - W^T W`` (a symmetric rank-m downdate: the optimal-gain form of
-    the Joseph update, a third of its cost at the IMU rate). Returns False (P unchanged) if
-    ``S`` is not positive definite.
-    """
+def _innovation_cov(H, P, R, m, HP, S):
+    """``HP = H P`` and ``S = H P H^T + R`` for the first ``m`` rows."""
     n = P.shape[0]
     _hp(H, P, m, HP)
     for a in range(m):
         for b in range(a + 1):
             v = R[a, b]
             for q in range(n):
-                v += HP[a, q] * H[b, q]
+                h = H[b, q]
+                if h != 0.0:
+                    v += HP[a, q] * h
             S[a, b] = v
             S[b, a] = v
+
+
+@njit(cache=True)
+def _kalman_update(P, H, z, m, HP, S, x, Kt, G, s, L, W, V, want_G):
+    """Stacked Kalman update with the first ``m`` rows of ``H``, ``z`` and their
+    ``HP = H P``, ``S = H P H^T + R`` (:func:`_innovation_cov`).
+
+    With ``S = L L^T`` and ``W = L^-1 H P``: the gain (transposed) ``K^T = L^-T W``,
+    ``x = K z``, ``G = S^-1 H`` (if ``want_G``), ``s = S^-1 z`` and ``P <- P - K S K^T =
+    P - W^T W`` (a
+    symmetric rank-m downdate: the optimal-gain form of the Joseph update at a fraction of its
+    cost). Returns False (P unchanged) if ``S`` is not positive definite.
+    """
+    n = P.shape[0]
     for i in range(m):  # Cholesky S = L L^T
         for k in range(i + 1):
             v = S[i, k]
@@ -181,8 +201,9 @@ def _kalman_update(P, H, R, z, m, x, Kt, G, s, HP, S, L, W, V):
                 L[i, k] = v / L[k, k]
     _forward_sub(L, HP, m, W)
     _back_sub(L, W, m, Kt)
-    _forward_sub(L, H, m, V)
-    _back_sub(L, V, m, G)
+    if want_G:
+        _forward_sub(L, H, m, V)
+        _back_sub(L, V, m, G)
     for i in range(m):  # s = S^-1 z
         v = z[i]
         for q in range(i):
@@ -198,46 +219,69 @@ def _kalman_update(P, H, R, z, m, x, Kt, G, s, HP, S, L, W, V):
         for a in range(m):
             v += Kt[a, i] * z[a]
         x[i] = v
+    for a in range(m):  # P -= W^T W (upper triangle, row operations)
+        for i in range(n):
+            wi = W[a, i]
+            if wi != 0.0:
+                for j in range(i, n):
+                    P[i, j] -= wi * W[a, j]
     for i in range(n):
-        for j in range(i, n):
-            v = P[i, j]
-            for a in range(m):
-                v -= W[a, i] * W[a, j]
-            P[i, j] = v
-            P[j, i] = v
+        for j in range(i + 1, n):
+            P[j, i] = P[i, j]
     return True
 
 
 @njit(cache=True)
-def dense_segment(model, t, dth, dv, pos, vel, C, pnom, i_sg, i_sa, gmodel, aupd, q_g, q_a, dyn,
-                  decay, qdiag, Fx, Qx, table, seg, post, rates, j, frac, t_end, P, node,
-                  node_t, Pf, Pp, Phi, fb, par, ptr, Hs, Ks, Gs, ss, row,
-                  hr_ptr, hr_m, hr_r, kinds, ips, fps, vptr, vals, stds, tids, thrs, gyro_psd,
-                  streak, recovery, n_nav, check, rw_on, rw_t, rw_v, rw_state, rw_scratch,
-                  rw_window, rw_min, rw_bound, lg_t, lg_tid, lg_dof, lg_nis, lg_thr, lg_flags,
-                  lg_z, lg_s, status):
-    """Run the IMU rows ``j ..`` with ``t[j] <= t_end`` of a dense segment (module docstring):
-    one node per row, written at ``node, node + 1, ...`` of the store arrays; update rows from
-    ``row``; log records from 0.
+def _store_std_row(table, j, P, C, J, es, n):
+    """Forward-table std columns (``STD_COLS``), parameter values are written by the caller,
+    and parameter stds of row ``j`` from ``P`` (see :func:`.kernels.assemble_output`)."""
+    Pa = P[6:9, 6:9]
+    _euler_std(C, Pa, J, es)
+    for i in range(6):
+        table[j, 9 + i] = np.sqrt(max(P[i, i], 0.0))
+    for i in range(3):
+        table[j, 15 + i] = es[i]
+    npar = n - 9
+    for i in range(npar):
+        table[j, 18 + npar + i] = np.sqrt(max(P[9 + i, 9 + i], 0.0))
 
-    ``status`` (int64[4]) receives (code, nodes written, update rows written, log records);
-    the return value is ``(j, frac, fail_time, fail_value, fail_type)``.
+
+@njit(cache=True)
+def dense_segment(model, dynamics, t, dth, dv, pos, vel, C, pnom, i_sg, i_sa, gmodel, aupd, q_g,
+                  q_a, dyn, decay, qdiag, Fx, Qx, table, seg, post, rates, f_ptr, f_col, f_act,
+                  q_row, q_col, j, frac, t_end, P, hr0, hr_t, hr_row, hr_F, hr_Q, hr_fb, hr_r0,
+                  hr_r1, hr_ppi, pp_out, Hs, Ks, Gs, ss, row, store_G, hr_ptr, hr_m, hr_r, kinds,
+                  ips, fps, vptr, vals, stds, tids, thrs, gyro_psd, streak, recovery, n_nav, check,
+                  rw_on, rw_t, rw_v, rw_state, rw_scratch, rw_window, rw_min, rw_bound, lg_t,
+                  lg_tid, lg_dof, lg_nis, lg_thr, lg_flags, lg_z, lg_s, status):
+    """Run the IMU rows ``j ..`` with ``t[j] <= t_end`` of a dense segment (module docstring):
+    one high-rate sample per row, written at ``hr0, hr0 + 1, ...`` of the high-rate arrays of
+    the store (:class:`insgnss.filter.store.NodeStore`); update rows from ``row`` (``G`` only
+    if ``store_G``); log records from 0; the forward table rows complete (nominal, stds,
+    parameters).
+
+    ``status`` (int64[4]) receives (code, samples written, update rows written, log records);
+    the return value is ``(j, frac, fail_time, fail_value, fail_type)``. After a sample whose
+    predicted covariance a gate recovery inflated, the call returns with code ``RECOVERED``
+    and that ``P(i|i-1)`` in ``pp_out`` (the smoother needs it); the caller continues the
+    segment with another call.
     """
     n = P.shape[0]
     n_t = t.shape[0]
+    npar = n - 9
     F = np.zeros((n, n))
     Qd = np.zeros((n, n))
     Qg = np.zeros((3, 3))
     Qa = np.zeros((3, 3))
     A = np.empty((n, n))
     B = np.empty((n, n))
-    ri = np.empty(n * n, np.int64)
-    ci = np.empty(n * n, np.int64)
-    fv = np.empty(n * n)
+    Lc = np.empty((n, n))
     work = np.empty(STEP_WORK_SHAPE)
     dthc = np.empty(3)
     dvc = np.empty(3)
     w_ib = np.empty(3)
+    J3 = np.empty((3, 3))
+    es = np.empty(3)
     n_meas_max = 1
     for jj in range(j, n_t):
         n_meas_max = max(n_meas_max, hr_ptr[jj + 1] - hr_ptr[jj])
@@ -247,11 +291,9 @@ def dense_segment(model, t, dth, dv, pos, vel, C, pnom, i_sg, i_sa, gmodel, aupd
     Hk = np.zeros((mmax, n))
     Rk = np.zeros((mmax, mmax))
     zk = np.zeros(mmax)
-    Hm = np.empty((3, n))
-    Rm = np.empty((3, 3))
-    zm = np.empty(3)
-    Sm = np.empty((3, 3))
-    HPm = np.empty((3, n))
+    off = np.zeros(n_meas_max + 1, np.int64)
+    mk = np.zeros(n_meas_max, np.int64)
+    acc = np.zeros(n_meas_max, np.bool_)
     x = np.zeros(n)
     Kt = np.empty((mmax, n))
     G = np.empty((mmax, n))
@@ -261,13 +303,18 @@ def dense_segment(model, t, dth, dv, pos, vel, C, pnom, i_sg, i_sa, gmodel, aupd
     L = np.empty((mmax, mmax))
     W = np.empty((mmax, n))
     V = np.empty((mmax, n))
+    Ln = np.empty((3, 3))
+    wn = np.empty(3)
+    fb_work = np.empty((3, 3, 3))
     any_decay = False
     for i in range(9, n):
         if decay[i] > 0.0:
             any_decay = True
     has_fx = Fx.shape[0] == n
     has_qx = Qx.shape[0] == n
-    k_node = node
+    na = f_act.shape[0]
+    nq = q_row.shape[0]
+    h = hr0
     n_log = 0
     r = row
     code = OK
@@ -277,16 +324,16 @@ def dense_segment(model, t, dth, dv, pos, vel, C, pnom, i_sg, i_sa, gmodel, aupd
         a = 1.0 - frac
         dt_s = a * dt_full
         # --- 1. propagate over the interval
-        for i in range(n):
-            for c in range(n):
-                F[i, c] = 0.0
-                Qd[i, c] = 0.0
+        for p in range(na):
+            i = f_act[p]
+            for q in range(f_ptr[p], f_ptr[p + 1]):
+                F[i, f_col[q]] = 0.0
         for i in range(3):
             for c in range(3):
                 Qg[i, c] = 0.0
                 Qa[i, c] = 0.0
-        _model_step(model, pos, vel, C, pnom, dth[j], dv[j], a, dt_s, i_sg, i_sa, gmodel, aupd, F,
-                    Qg, Qa, q_g, q_a, dyn, dthc, dvc, work)
+        _model_step(model, dynamics, pos, vel, C, pnom, dth[j], dv[j], a, dt_s, i_sg, i_sa,
+                    gmodel, aupd, F, Qg, Qa, q_g, q_a, dyn, dthc, dvc, work)
         for i in range(3):
             w_ib[i] = dthc[i] / dt_s if dt_s > 0.0 else 0.0
             rates[0, i] = rates[1, i] = w_ib[i]
@@ -295,53 +342,69 @@ def dense_segment(model, t, dth, dv, pos, vel, C, pnom, i_sg, i_sa, gmodel, aupd
             for i in range(9, n):
                 if decay[i] > 0.0:
                     pnom[i - 9] *= np.exp(-decay[i] * dt_s)
+                    F[i, i] -= decay[i] * dt_s
+        if has_fx:
+            for i in range(9, n):
+                for c in range(9, n):
+                    F[i, c] += Fx[i, c] * dt_s
         for i in range(n):
-            F[i, i] -= decay[i] * dt_s
             Qd[i, i] = qdiag[i] * dt_s
         for i in range(3):
             for c in range(3):
-                Qd[3 + i, 3 + c] += Qa[i, c]
-                Qd[6 + i, 6 + c] += Qg[i, c]
-        if has_fx:
-            for i in range(n):
-                for c in range(n):
-                    F[i, c] += Fx[i, c] * dt_s
+                Qd[3 + i, 3 + c] = Qa[i, c]
+                Qd[6 + i, 6 + c] = Qg[i, c]
         if has_qx:
-            for i in range(n):
-                for c in range(n):
-                    Qd[i, c] += Qx[i, c] * dt_s
-        _first_order_propagation(P, F, Qd, A, B, ri, ci, fv)
+            for i in range(9, n):
+                for c in range(9, n):
+                    Qd[i, c] = Qx[i, c] * dt_s + (qdiag[i] * dt_s if i == c else 0.0)
+        _first_order_propagation(P, F, Qd, f_ptr, f_col, f_act, q_row, q_col, A, B)
         frac = 0.0
-        if check:
+        if check:  # cheap every sample: finite, positive variances
             fin = pos[0] + pos[1] + pos[2] + vel[0] + vel[1] + vel[2]
+            pos_var = True
             for i in range(n):
                 fin += P[i, i]
+                if not P[i, i] > 0.0:
+                    pos_var = False
             if not np.isfinite(fin):
                 code = NONFINITE
                 fail_t = t[j]
                 break
-        # --- 2. evaluate and gate the high-rate measurements at this sample
-        m_acc = 0
+            if not pos_var:
+                code = NOT_PD
+                fail_t = t[j]
+                break
+        # --- 2. evaluate, then gate each measurement against the predicted P
+        nm = 0
+        m_tot = 0
         for e in range(hr_ptr[j], hr_ptr[j + 1]):
             mi = hr_m[e]
             vr = vptr[mi] + hr_r[e]
             window = dt_s if ips[mi, 7] == 1 else 0.0
             d = evaluate_compiled(kinds[mi], ips[mi], fps[mi], vals[vr], stds[vr], vel, C,
-                                  pos[0], w_ib, window, gyro_psd, pnom, zm, Hm, Rm)
+                                  pos[0], w_ib, window, gyro_psd, pnom, zk[m_tot:],
+                                  Hk[m_tot:], Rk[m_tot:, m_tot:])
             if d == 0:
                 continue
-            zd = zm[:d]
-            Hd = Hm[:d]
-            Rd = Rm[:d, :d]
-            _hp(Hd, P, d, HPm)
-            for p in range(d):
-                for q in range(d):
-                    v = Rd[p, q]
-                    for c in range(n):
-                        v += HPm[p, c] * Hd[q, c]
-                    Sm[p, q] = v
-            Sd = Sm[:d, :d]
-            nis = gating.nis(Sd, zd)
+            for p in range(m_tot):  # zero the off-diagonal blocks of R
+                for q in range(m_tot, m_tot + d):
+                    Rk[p, q] = 0.0
+                    Rk[q, p] = 0.0
+            off[nm] = m_tot
+            mk[nm] = e
+            nm += 1
+            m_tot += d
+            off[nm] = m_tot
+        if nm:
+            _innovation_cov(Hk, P, Rk, m_tot, HP, S)
+        m_acc = 0
+        recovered = False
+        for k in range(nm):
+            o0, o1 = off[k], off[k + 1]
+            d = o1 - o0
+            mi = hr_m[mk[k]]
+            zd = zk[o0:o1]
+            nis = gating.nis_into(S[o0:o1, o0:o1], zd, Ln, wn)
             tid = tids[mi]
             if rw_on:
                 med = health.runaway_push(rw_t, rw_v, rw_state, tid, t[j], nis / d, rw_window,
@@ -353,48 +416,56 @@ def dense_segment(model, t, dth, dv, pos, vel, C, pnom, i_sg, i_sa, gmodel, aupd
             thr = thrs[mi]
             gc = gating.gate_step(streak, tid, t[j], nis, thr, recovery)
             if gc == gating.RECOVER:
-                Si = gating.inflate_for(P, Hd, Rd, zd, thr, n_nav)
-                for p in range(d):
-                    for q in range(d):
-                        Sm[p, q] = Si[p, q]
-                nis = gating.nis(Sm[:d, :d], zd)
+                gating.inflate_for(P, Hk[o0:o1], Rk[o0:o1, o0:o1], zd, thr, n_nav)
+                _innovation_cov(Hk, P, Rk, m_tot, HP, S)  # the others see the inflated P
+                nis = gating.nis_into(S[o0:o1, o0:o1], zd, Ln, wn)
+                recovered = True
+            acc[k] = gc != gating.REJECT
+            if acc[k]:
+                m_acc += d
             lg_t[n_log] = t[j]
             lg_tid[n_log] = tid
             lg_dof[n_log] = d
             lg_nis[n_log] = nis
             lg_thr[n_log] = thr
-            lg_flags[n_log, 0] = gc != gating.REJECT
+            lg_flags[n_log, 0] = acc[k]
             lg_flags[n_log, 1] = gc == gating.RECOVER
             for p in range(3):
                 lg_z[n_log, p] = zd[p] if p < d else np.nan
-                lg_s[n_log, p] = np.sqrt(max(Sm[p, p], 0.0)) if p < d else np.nan
+                lg_s[n_log, p] = np.sqrt(max(S[o0 + p, o0 + p], 0.0)) if p < d else np.nan
             n_log += 1
-            if gc != gating.REJECT:
-                for p in range(d):
-                    zk[m_acc + p] = zd[p]
-                    for c in range(n):
-                        Hk[m_acc + p, c] = Hd[p, c]
-                    for q in range(mmax):
-                        Rk[m_acc + p, q] = 0.0
-                        Rk[q, m_acc + p] = 0.0
-                for p in range(d):
-                    for q in range(d):
-                        Rk[m_acc + p, m_acc + q] = Rd[p, q]
-                m_acc += d
         if code != OK:
             break
-        for i in range(n):
-            for c in range(n):
-                Pp[k_node, i, c] = P[i, c]
+        if m_acc < m_tot:  # drop the rejected rows (and their rows/columns of HP, S)
+            dst = 0
+            for k in range(nm):
+                if not acc[k]:
+                    continue
+                for p in range(off[k], off[k + 1]):
+                    zk[dst] = zk[p]
+                    for c in range(n):
+                        Hk[dst, c] = Hk[p, c]
+                        HP[dst, c] = HP[p, c]
+                    dc = 0
+                    for k2 in range(nm):
+                        if acc[k2]:
+                            for q in range(off[k2], off[k2 + 1]):
+                                S[dst, dc] = S[p, q]
+                                dc += 1
+                    dst += 1
+        hr_ppi[h] = -1
+        if recovered:
+            for i in range(n):
+                for c in range(n):
+                    pp_out[i, c] = P[i, c]
         # --- 3. stacked update and feedback
-        for i in range(n):
-            fb[k_node, i] = 0.0
+        hr_r0[h] = r
         if m_acc > 0:
-            if not _kalman_update(P, Hk, Rk, zk, m_acc, x, Kt, G, sv, HP, S, L, W, V):
+            if not _kalman_update(P, Hk, zk, m_acc, HP, S, x, Kt, G, sv, L, W, V, store_G):
                 code = NOT_PD
                 fail_t = t[j]
                 break
-            if check and not health.is_positive_definite(P):
+            if check and (h - hr0) % 64 == 0 and not _cholesky_ok(P, Lc):
                 code = NOT_PD
                 fail_t = t[j]
                 break
@@ -402,31 +473,60 @@ def dense_segment(model, t, dth, dv, pos, vel, C, pnom, i_sg, i_sa, gmodel, aupd
                 for c in range(n):
                     Hs[r, c] = Hk[p, c]
                     Ks[r, c] = Kt[p, c]
-                    Gs[r, c] = G[p, c]
+                    if store_G:
+                        Gs[r, c] = G[p, c]
                 ss[r] = sv[p]
                 r += 1
             for i in range(n):
-                fb[k_node, i] = x[i]
-            _model_feedback(model, pos, vel, C, pnom, x)
-        # --- 4. store the node and the IMU-rate nominal row
-        node_t[k_node] = t[j]
-        for i in range(n):
-            for c in range(n):
-                Phi[k_node, i, c] = F[i, c] + (1.0 if i == c else 0.0)
-                Pf[k_node, i, c] = P[i, c]
-        for i in range(pnom.shape[0]):
-            par[k_node, i] = pnom[i]
-        ptr[k_node + 1] = r
+                hr_fb[h, i] = x[i]
+            _model_feedback(model, pos, vel, C, pnom, x, fb_work)
+        else:
+            for i in range(n):
+                hr_fb[h, i] = 0.0
+        hr_r1[h] = r
+        # --- 4. store the smoother step and the forward-table row
+        hr_t[h] = t[j]
+        hr_row[h] = j
+        for p in range(na):
+            i = f_act[p]
+            for q in range(f_ptr[p], f_ptr[p + 1]):
+                hr_F[h, q] = F[i, f_col[q]]
+        for q in range(nq):
+            hr_Q[h, q] = Qd[q_row[q], q_col[q]]
         store_nav(table, j, pos, vel, C)
-        seg[j] = k_node
+        for i in range(npar):
+            table[j, 18 + i] = pnom[i]
+        _store_std_row(table, j, P, C, J3, es, n)
+        seg[j] = -1 - h
         post[j] = True
-        k_node += 1
+        h += 1
         j += 1
+        if recovered:
+            code = RECOVERED
+            break
     status[0] = code
-    status[1] = k_node - node
+    status[1] = h - hr0
     status[2] = r - row
     status[3] = n_log
     return j, frac, fail_t, fail_v, fail_tid
+
+
+@njit(cache=True)
+def _cholesky_ok(P, L):
+    """True if P is positive definite (Cholesky into the scratch L)."""
+    n = P.shape[0]
+    for i in range(n):
+        for k in range(i + 1):
+            v = P[i, k]
+            for q in range(k):
+                v -= L[i, q] * L[k, q]
+            if i == k:
+                if not v > 0.0:
+                    return False
+                L[i, i] = np.sqrt(v)
+            else:
+                L[i, k] = v / L[k, k]
+    return True
 
 
 class HighRate:
@@ -463,10 +563,11 @@ class HighRate:
         self.thrs = np.array([run.gates.threshold(run.gates.probability(m), d)
                               for m, d in zip(measurements, dofs, strict=True)], float)
         self.gyro_psd = np.asarray(model.noise.gyro_psd, float)
+        self.pattern = model.f_pattern()
 
-    def segment(self, t_end: float, node: int, P: np.ndarray):
-        """Run the dense segment up to ``t_end`` from ``node``; returns ``(node, P)`` after it.
-        Raises FilterHealthError (after keeping the nodes written) when the segment failed."""
+    def segment(self, t_end: float, P: np.ndarray) -> np.ndarray:
+        """Run the dense segment up to ``t_end``; returns ``P`` after it. Raises
+        FilterHealthError (after keeping the samples written) when the segment failed."""
         run, model, store = self.run, self.model, self.run.store
         sched = run.sched
         t = model.t
@@ -481,24 +582,35 @@ class HighRate:
         status = np.zeros(4, np.int64)
         rw = run.runaway
         P = np.array(P, dtype=float, order="C")
-        c0 = _time.perf_counter()
-        j, frac, fail_t, fail_v, fail_tid = dense_segment(
-            *model.high_rate_args(), model.j, model.frac, t_end, P, node,
-            store.t, store.Pf, store.Pp, store.Phi, store.fb, store.par, store.ptr, store.H,
-            store.K, store.G, store.s, store.n_rows,
-            sched.hr_ptr, sched.hr_m, sched.hr_r, self.kinds, self.ips, self.fps, self.vptr,
-            self.vals, self.stds, self.tids, self.thrs, self.gyro_psd,
-            run.streak, run.recovery, model.n_nav, run.check, rw.enabled, rw.buf_t, rw.buf_v,
-            rw.state, rw.scratch, rw.window, rw.min_count, rw.bound,
-            lg["time"], lg["tid"], lg["dof"], lg["nis"], lg["threshold"], lg["flags"],
-            lg["innov"], lg["innov_std"], status)
-        code, n_nodes, n_rows, n_log = (int(v) for v in status)
-        run.timing["high_rate"] = run.timing.get("high_rate", 0.0) + _time.perf_counter() - c0
-        if n_nodes:
-            model.j, model.frac = j, frac
-            model.advance_to(float(store.t[node + n_nodes - 1]))
-        store.n_rows += n_rows
-        store.count = node + n_nodes
+        pp_out = np.empty_like(P)
+        n_log = 0
+        while True:
+            c0 = _time.perf_counter()
+            h0 = store.hr_count
+            j, frac, fail_t, fail_v, fail_tid = dense_segment(
+                *model.high_rate_args(), *self.pattern, model.j, model.frac, t_end, P, h0,
+                store.hr_t, store.hr_row, store.hr_F, store.hr_Q, store.hr_fb, store.hr_r0,
+                store.hr_r1, store.hr_ppi, pp_out, store.H, store.K, store.G, store.s,
+                store.n_rows, bool(run.config.smoother_covariance),
+                sched.hr_ptr, sched.hr_m, sched.hr_r, self.kinds, self.ips, self.fps, self.vptr,
+                self.vals, self.stds, self.tids, self.thrs, self.gyro_psd,
+                run.streak, run.recovery, model.n_nav, run.check, rw.enabled, rw.buf_t,
+                rw.buf_v, rw.state, rw.scratch, rw.window, rw.min_count, rw.bound,
+                lg["time"][n_log:], lg["tid"][n_log:], lg["dof"][n_log:], lg["nis"][n_log:],
+                lg["threshold"][n_log:], lg["flags"][n_log:], lg["innov"][n_log:],
+                lg["innov_std"][n_log:], status)
+            code, n_s, n_rows, n_new = (int(v) for v in status)
+            run.timing["high_rate"] = (run.timing.get("high_rate", 0.0)
+                                       + _time.perf_counter() - c0)
+            n_log += n_new
+            if n_s:
+                model.j, model.frac = j, frac
+                model.advance_to(float(store.hr_t[h0 + n_s - 1]))
+            store.n_rows += n_rows
+            store.hr_count = h0 + n_s
+            if code != RECOVERED:
+                break
+            store.add_hr_predicted(h0 + n_s - 1, pp_out)
         run.log.add_block({"time": lg["time"][:n_log], "tid": lg["tid"][:n_log],
                            "dof": lg["dof"][:n_log], "nis": lg["nis"][:n_log],
                            "threshold": lg["threshold"][:n_log],
@@ -510,7 +622,7 @@ class HighRate:
                                     "(high-rate propagation)", found="NaN/inf in P or nominal")
         if code == NOT_PD:
             raise FilterHealthError(f"covariance is not positive definite at t = {fail_t:.6f} s "
-                                    "(high-rate update)", found="Cholesky factorisation failed")
+                                    "(high-rate path)", found="Cholesky factorisation failed")
         if code == RUNAWAY:
             raise rw.error(int(fail_tid), run.log.names[int(fail_tid)], fail_t, fail_v)
-        return node + n_nodes, P
+        return P

@@ -19,7 +19,7 @@ from numba import njit
 from ..attitude import euler_to_dcm_nb, rotvec_to_dcm_nb
 from ..earth import gravity_somigliana, radii
 from ..mechanization.strapdown import STEP_WORK_SHAPE, strapdown_step
-from .models import accumulate_error_dynamics
+from .models import accumulate_error_dynamics, accumulate_short_term_dynamics
 
 DISC_SECOND_ORDER = 0
 DISC_VANLOAN = 1
@@ -45,10 +45,11 @@ _euler_dcm = euler_to_dcm_nb  # one compiled implementation (insgnss.attitude)
 
 @njit(cache=True)
 def interval_step(pos, vel, C, pnom, dth_j, dv_j, a, dt_s, i_sg, i_sa, gravity_model,
-                  attitude_update, F, Qg, Qa, q_g, q_a, dyn, dthc, dvc, work):
+                  attitude_update, F, Qg, Qa, q_g, q_a, dyn, dthc, dvc, work, dynamics=0):
     """One IMU interval (share ``a`` of row ``dth_j, dv_j``, duration ``dt_s``) of the strapdown
     process model: compensate the increments with the nominal biases (and scale factors) in
-    ``pnom``, add ``F dt`` (:func:`.models.accumulate_error_dynamics`) to ``F`` and the rotated
+    ``pnom``, add ``F dt`` (``dynamics`` 0: :func:`.models.accumulate_error_dynamics`, 1: the
+    short-term model :func:`.models.accumulate_short_term_dynamics`) to ``F`` and the rotated
     white-noise integrals ``C diag(q_g) C^T dt``, ``C diag(q_a) C^T dt`` to ``Qg``, ``Qa``, then
     advance the nominal ``pos, vel, C`` (:func:`strapdown_step`). ``dthc, dvc`` receive the
     compensated increments.
@@ -67,7 +68,10 @@ def interval_step(pos, vel, C, pnom, dth_j, dv_j, a, dt_s, i_sg, i_sa, gravity_m
             f /= 1.0 + pnom[i_sa - 9 + i]
         dthc[i] = g
         dvc[i] = f
-    accumulate_error_dynamics(F, dt_s, pos[0], pos[2], vel, C, dthc, dvc, i_sg, i_sa)
+    if dynamics == 0:
+        accumulate_error_dynamics(F, dt_s, pos[0], pos[2], vel, C, dthc, dvc, i_sg, i_sa)
+    else:
+        accumulate_short_term_dynamics(F, dt_s, C, dthc, dvc, i_sg, i_sa)
     va_dyn = 0.0
     vg_dyn = 0.0
     if dyn[0] > 0.0 or dyn[1] > 0.0:
@@ -97,7 +101,7 @@ def interval_step(pos, vel, C, pnom, dth_j, dv_j, a, dt_s, i_sg, i_sa, gravity_m
 @njit(cache=True)
 def propagate_nominal(t, dth, dv, j, frac, t_end, pos, vel, C, pnom, i_sg, i_sa,
                       gravity_model, attitude_update, sub_T, Fint, Qint, sub_dt, q_g, q_a,
-                      nav_out, out_seg, seg_id, rates, dyn=None):
+                      nav_out, out_seg, seg_id, rates, dyn=None, dynamics=0):
     """Mechanize from the current point (row ``j``, share ``frac`` consumed) to ``t_end``.
 
     The nominal state ``pos, vel, C`` is advanced in place using the increments compensated
@@ -109,7 +113,8 @@ def propagate_nominal(t, dth, dv, j, frac, t_end, pos, vel, C, pnom, i_sg, i_sa,
     Over covariance sub-intervals of length ``sub_T`` (restarted at the segment start, the
     last one possibly shorter), ``Fint[s]`` receives ``int F dt``, ``Qint[s, 0 / 1]`` the
     integrals of ``C diag(q_g) C^T`` and ``C diag(q_a) C^T`` and ``sub_dt[s]`` the duration
-    (:func:`interval_step`; ``dyn``: its dynamics-dependent noise, default none).
+    (:func:`interval_step`; ``dyn``: its dynamics-dependent noise, default none; ``dynamics``:
+    its error model, default the full one).
 
     ``rates`` (4, 3) receives the compensated angular rate and specific force of the last
     interval (rows 0, 2) and their means over the segment (rows 1, 3).
@@ -154,7 +159,7 @@ def propagate_nominal(t, dth, dv, j, frac, t_end, pos, vel, C, pnom, i_sg, i_sa,
             acc = 0.0
         interval_step(pos, vel, C, pnom, dth[j], dv[j], a, dt_s, i_sg, i_sa, gravity_model,
                       attitude_update, Fint[s], Qint[s, 0], Qint[s, 1], q_g, q_a, dyn_k, dthc,
-                      dvc, work)
+                      dvc, work, dynamics)
         sub_dt[s] += dt_s
         acc += dt_s
         for i in range(3):
@@ -416,6 +421,12 @@ def apply_feedback(pos, vel, C, pnom, x):
     """Closed-loop correction of the nominal state by the error estimate ``x`` (nominal minus
     true): position (ENU metres -> lat/lon/h), velocity, attitude ``C <- exp(-[phi x]) C``
     and the parameters ``pnom -= x[9:]``."""
+    apply_feedback_into(pos, vel, C, pnom, x, np.empty((3, 3, 3)))
+
+
+@njit(cache=True)
+def apply_feedback_into(pos, vel, C, pnom, x, work):
+    """:func:`apply_feedback` with the scratch ``work`` (3, 3, 3) (no allocation)."""
     M, N = radii(pos[0])
     h = pos[2]
     lat = pos[0]
@@ -424,11 +435,11 @@ def apply_feedback(pos, vel, C, pnom, x):
     pos[2] -= x[2]
     for i in range(3):
         vel[i] -= x[3 + i]
-    phi = np.empty(3)
+    phi = work[2, 0]
     phi[0], phi[1], phi[2] = -x[6], -x[7], -x[8]
-    R = np.empty((3, 3))
+    R = work[0]
     rotvec_to_dcm_nb(phi, R)
-    Cn = np.empty((3, 3))
+    Cn = work[1]
     _mm(R, C, Cn)
     _copy(Cn, C)
     for i in range(pnom.shape[0]):
@@ -467,7 +478,7 @@ def _euler_std(C, Pa, J, out):
 
 @njit(cache=True)
 def assemble_output(t, nav_in, out_seg, out_post, ep_t, P_start, P_end, X_start, X_end, pnom_ep,
-                    n_rows, correct, out):
+                    n_rows, correct, out, X_hr, hr_node):
     """IMU-rate output rows: nominal (optionally corrected) navigation state, stds, parameters.
 
     ``nav_in[j, 0:9]`` is the stored forward nominal (NAV_COLS). Sample ``j`` belongs to
@@ -480,6 +491,11 @@ def assemble_output(t, nav_in, out_seg, out_post, ep_t, P_start, P_end, X_start,
     Forward run (``correct=False``, ``X`` unused, ``out`` may be ``nav_in`` itself: columns 0-8
     are then left as they are): ``P_start = P(e|e)``, ``P_end = P(e|e-1)``.
     Smoothed run: ``X_start = xs_plus``, ``X_end = xs_minus``, ``P_start = P_end = Ps``.
+
+    Rows of the compiled high-rate path have ``out_seg[j] = -1 - i`` (high-rate sample ``i``,
+    between nodes ``hr_node[i] - 1`` and ``hr_node[i]``): their forward row is complete already
+    (skipped); smoothed, they take ``X_hr[i]``, the parameter nominal of their forward row and
+    the covariance interpolated between those two nodes.
 
     ``out`` columns: lat lon height vel_e vel_n vel_u roll pitch heading, 9 stds (east north
     up, vel, roll pitch heading), then for each parameter state its value and its std.
@@ -496,9 +512,34 @@ def assemble_output(t, nav_in, out_seg, out_post, ep_t, P_start, P_end, X_start,
     phi = np.empty(3)
     J = np.empty((3, 3))
     es = np.empty(3)
+    n_nodes = ep_t.shape[0]
     for j in range(n_rows):
         e = out_seg[j]
-        if out_post[j]:
+        hr = e < 0
+        if hr:
+            if not correct:
+                continue
+            i_hr = -1 - e
+            for a in range(n):
+                x[a] = X_hr[i_hr, a]
+            e = hr_node[i_hr]
+            if e >= n_nodes:  # after the last node (a stopped run): its covariance
+                e = n_nodes - 1
+                for a in range(n):
+                    pdiag[a] = P_start[e, a, a]
+                for a in range(3):
+                    for b in range(3):
+                        Pa[a, b] = P_start[e, 6 + a, 6 + b]
+            else:
+                w = (t[j] - ep_t[e - 1]) / (ep_t[e] - ep_t[e - 1])
+                for a in range(n):
+                    pdiag[a] = (1.0 - w) * P_start[e - 1, a, a] + w * P_end[e, a, a]
+                for a in range(3):
+                    for b in range(3):
+                        Pa[a, b] = ((1.0 - w) * P_start[e - 1, 6 + a, 6 + b]
+                                    + w * P_end[e, 6 + a, 6 + b])
+            ep = -1
+        elif out_post[j]:
             for a in range(n):
                 if correct:
                     x[a] = X_start[e, a]
@@ -544,5 +585,6 @@ def assemble_output(t, nav_in, out_seg, out_post, ep_t, P_start, P_end, X_start,
         for i in range(3):
             out[j, 15 + i] = es[i]
         for i in range(npar):
-            out[j, 18 + i] = pnom_ep[ep, i] - x[9 + i]
+            p_nom = nav_in[j, 18 + i] if hr else pnom_ep[ep, i]
+            out[j, 18 + i] = p_nom - x[9 + i]
             out[j, 18 + npar + i] = np.sqrt(max(pdiag[9 + i], 0.0))

@@ -806,7 +806,7 @@ class RissModel(ProcessModelBase):
             return _assemble(t, self.out_st, self.out_aux, self.seg, self.post, store.t,
                              store.Pf[:n_nodes], store.Pp[:n_nodes], zeros, zeros, store.par,
                              self.proc)
-        xs_plus, xs_minus, Ps = smoothed
+        xs_plus, xs_minus, Ps, _ = smoothed
         return _assemble(t, self.out_st, self.out_aux, self.seg, self.post, store.t, Ps, Ps,
                          xs_plus, xs_minus, store.par, self.proc)
 

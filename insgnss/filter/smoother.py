@@ -62,12 +62,121 @@ __all__ = ["mbf_backward", "rts_error_state", "smooth"]
 
 
 @njit(cache=True)
-def mbf_backward(Pf, Phi, fb, ptr, H, K, G, s, n_nodes, covariance, xs_plus, xs_minus, Ps):
-    """Modified Bryson-Frazier backward pass over nodes ``0 .. n_nodes-1`` (module docstring).
+def _through_update(lam, lt, Lam, Lt, H, K, G, s, r0, r1, covariance, KL, W):
+    """``lambda~ = lambda^ - H^T (S^-1 z + K^T lambda^)`` and (``covariance``)
+    ``Lambda~ = H^T S^-1 H + (I - K H)^T Lambda^ (I - K H)`` for the update rows r0 .. r1-1."""
+    n = lam.shape[0]
+    m = r1 - r0
+    for i in range(n):
+        lt[i] = lam[i]
+    for r in range(r0, r1):
+        c = s[r]
+        for i in range(n):
+            c += K[r, i] * lam[i]
+        for i in range(n):
+            lt[i] -= H[r, i] * c
+    if not covariance:
+        return
+    for i in range(n):
+        for j in range(n):
+            Lt[i, j] = Lam[i, j]
+    if m == 0:
+        return
+    # M^T Lam M = Lam - H^T (K^T Lam) - (K^T Lam)^T H + H^T (K^T Lam K) H
+    for a in range(m):
+        for j in range(n):
+            v = 0.0
+            for i in range(n):
+                v += K[r0 + a, i] * Lam[i, j]
+            KL[a, j] = v
+    for a in range(m):
+        for b in range(m):
+            v = 0.0
+            for j in range(n):
+                v += KL[a, j] * K[r0 + b, j]
+            W[a, b] = v
+    for a in range(m):
+        ha = H[r0 + a]
+        ga = G[r0 + a]
+        ka = KL[a]
+        for i in range(n):
+            hi = ha[i]
+            for j in range(n):
+                v = hi * (ga[j] - ka[j]) - ka[i] * ha[j]
+                for b in range(m):
+                    v += hi * W[a, b] * H[r0 + b, j]
+                Lt[i, j] += v
 
-    ``ptr``, ``H``, ``K`` (gain, transposed rows), ``G = S^-1 H`` and ``s = S^-1 z`` are the
-    update rows of :class:`insgnss.filter.store.NodeStore`. Writes ``xs_plus``, ``xs_minus``
-    (n_nodes, n) and, if ``covariance``, ``Ps`` (n_nodes, n, n).
+
+@njit(cache=True)
+def _back_through_sparse(lam, lt, Lam, Lt, Fv, f_ptr, f_col, f_act, covariance, C1):
+    """``lambda^ = Phi^T lambda~``, ``Lambda^ = Phi^T Lambda~ Phi`` for ``Phi = I + F`` with F
+    given at its pattern (values ``Fv``)."""
+    n = lam.shape[0]
+    for i in range(n):
+        lam[i] = lt[i]
+    for a in range(f_act.shape[0]):
+        i = f_act[a]
+        for q in range(f_ptr[a], f_ptr[a + 1]):
+            lam[f_col[q]] += Fv[q] * lt[i]
+    if not covariance:
+        return
+    for i in range(n):  # C1 = Lt F
+        for j in range(n):
+            C1[i, j] = 0.0
+    for a in range(f_act.shape[0]):
+        i = f_act[a]
+        for q in range(f_ptr[a], f_ptr[a + 1]):
+            c, v = f_col[q], Fv[q]
+            for r in range(n):
+                C1[r, c] += v * Lt[r, i]
+    for i in range(n):
+        for j in range(n):
+            Lam[i, j] = Lt[i, j] + C1[i, j] + C1[j, i]
+    for a in range(f_act.shape[0]):  # + F^T C1
+        i = f_act[a]
+        for q in range(f_ptr[a], f_ptr[a + 1]):
+            c, v = f_col[q], Fv[q]
+            for r in range(n):
+                Lam[c, r] += v * C1[i, r]
+
+
+@njit(cache=True)
+def _back_through_dense(lam, lt, Lam, Lt, F, covariance, T1):
+    """``lambda^ = Phi^T lambda~``, ``Lambda^ = Phi^T Lambda~ Phi`` for a dense ``Phi``."""
+    n = lam.shape[0]
+    for i in range(n):
+        v = 0.0
+        for j in range(n):
+            v += F[j, i] * lt[j]
+        lam[i] = v
+    if not covariance:
+        return
+    _mm(Lt, F, T1)  # Lt Phi
+    for i in range(n):
+        for j in range(i, n):
+            v = 0.0
+            for q in range(n):
+                v += F[q, i] * T1[q, j]
+            Lam[i, j] = v
+            Lam[j, i] = v
+
+
+@njit(cache=True)
+def mbf_backward(Pf, Phi, fb, r0, r1, H, K, G, s, n_nodes, seg0, seg1, n_hr, hr_F, hr_Q,
+                 hr_fb, hr_r0, hr_r1, hr_ppi, hr_Pp, f_ptr, f_col, f_act, q_row, q_col,
+                 covariance, xs_plus, xs_minus, Ps, xs_hr):
+    """Modified Bryson-Frazier backward pass (module docstring) over the nodes
+    ``0 .. n_nodes-1`` and the high-rate samples ``0 .. n_hr-1`` of a
+    :class:`~insgnss.filter.store.NodeStore`.
+
+    At the nodes: ``xs_plus``, ``xs_minus`` (n_nodes, n) and, if ``covariance``, ``Ps``.
+    At the high-rate samples (no stored covariance): ``lambda~`` is kept through each segment
+    and the smoothed errors are rebuilt forwards from the node before it,
+    ``xs_minus(i) = Phi_i xs_plus(i-1) - Qd_i lambda~_i`` (from ``P(i|i-1) = Phi_i P(i-1|i-1)
+    Phi_i^T + Qd_i``; at a sample whose ``P(i|i-1)`` a gate recovery inflated, stored in
+    ``hr_Pp``: ``xs_minus(i) = -P(i|i-1) lambda~_i``), ``xs_plus(i) = xs_minus(i) - fb(i)``,
+    into ``xs_hr`` (n_hr, n).
     """
     n = Pf.shape[1]
     lam = np.zeros(n)
@@ -75,12 +184,31 @@ def mbf_backward(Pf, Phi, fb, ptr, H, K, G, s, n_nodes, covariance, xs_plus, xs_
     Lam = np.zeros((n, n))
     Lt = np.empty((n, n))
     T1 = np.empty((n, n))
-    T2 = np.empty((n, n))
     m_max = 1
     for k in range(n_nodes):
-        m_max = max(m_max, ptr[k + 1] - ptr[k])
+        m_max = max(m_max, r1[k] - r0[k])
+    for h in range(n_hr):
+        m_max = max(m_max, hr_r1[h] - hr_r0[h])
     KL = np.empty((m_max, n))
     W = np.empty((m_max, m_max))
+    seg_max = 1
+    for k in range(n_nodes):
+        seg_max = max(seg_max, seg1[k] - seg0[k])
+    tail0 = seg1[n_nodes - 1]
+    seg_max = max(seg_max, n_hr - tail0)
+    LT = np.empty((seg_max, n))  # lambda~ of the samples of the pending segment
+    pend0, pend1 = 0, 0
+    x = np.empty(n)
+    xm = np.empty(n)
+
+    # trailing high-rate samples after the last node (a stopped run): lambda^ = 0 at the end
+    if n_hr > tail0:
+        for h in range(n_hr - 1, tail0 - 1, -1):
+            _through_update(lam, lt, Lam, Lt, H, K, G, s, hr_r0[h], hr_r1[h], covariance, KL, W)
+            for i in range(n):
+                LT[h - tail0, i] = lt[i]
+            _back_through_sparse(lam, lt, Lam, Lt, hr_F[h], f_ptr, f_col, f_act, covariance, T1)
+        pend0, pend1 = tail0, n_hr
     for k in range(n_nodes - 1, -1, -1):
         P = Pf[k]
         for i in range(n):
@@ -98,77 +226,64 @@ def mbf_backward(Pf, Phi, fb, ptr, H, K, G, s, n_nodes, covariance, xs_plus, xs_
                         v += T1[i, q] * P[q, j]
                     Ps[k, i, j] = P[i, j] - v
                     Ps[k, j, i] = Ps[k, i, j]
-        # through the update at k
-        r0, r1 = ptr[k], ptr[k + 1]
-        m = r1 - r0
-        for i in range(n):
-            lt[i] = lam[i]
-        for r in range(r0, r1):
-            c = s[r]
+        if pend1 > pend0:  # rebuild the smoothed errors of the segment after node k
             for i in range(n):
-                c += K[r, i] * lam[i]
-            for i in range(n):
-                lt[i] -= H[r, i] * c
-        if covariance:
-            for i in range(n):
-                for j in range(n):
-                    Lt[i, j] = Lam[i, j]
-            if m > 0:
-                # M^T Lam M = Lam - H^T (K^T Lam) - (K^T Lam)^T H + H^T (K^T Lam K) H
-                for a in range(m):
-                    for j in range(n):
-                        v = 0.0
-                        for i in range(n):
-                            v += K[r0 + a, i] * Lam[i, j]
-                        KL[a, j] = v
-                for a in range(m):
-                    for b in range(m):
-                        v = 0.0
-                        for j in range(n):
-                            v += KL[a, j] * K[r0 + b, j]
-                        W[a, b] = v
-                for a in range(m):
-                    ha = H[r0 + a]
-                    ga = G[r0 + a]
-                    ka = KL[a]
+                x[i] = xs_plus[k, i]
+            for h in range(pend0, pend1):
+                Fv = hr_F[h]
+                for i in range(n):
+                    xm[i] = x[i]
+                for a in range(f_act.shape[0]):
+                    i = f_act[a]
+                    for q in range(f_ptr[a], f_ptr[a + 1]):
+                        xm[i] += Fv[q] * x[f_col[q]]
+                if hr_ppi[h] >= 0:
+                    Pp = hr_Pp[hr_ppi[h]]
                     for i in range(n):
-                        hi = ha[i]
-                        for j in range(n):
-                            v = hi * (ga[j] - ka[j]) - ka[i] * ha[j]
-                            for b in range(m):
-                                v += hi * W[a, b] * H[r0 + b, j]
-                            Lt[i, j] += v
-        if k > 0:
-            F = Phi[k]
-            for i in range(n):
-                v = 0.0
-                for j in range(n):
-                    v += F[j, i] * lt[j]
-                lam[i] = v
-            if covariance:
-                _mm(Lt, F, T1)  # Lt Phi
-                for i in range(n):
-                    for j in range(i, n):
                         v = 0.0
-                        for q in range(n):
-                            v += F[q, i] * T1[q, j]
-                        T2[i, j] = v
+                        for j in range(n):
+                            v += Pp[i, j] * LT[h - pend0, j]
+                        xm[i] = -v
+                else:
+                    for q in range(q_row.shape[0]):
+                        xm[q_row[q]] -= hr_Q[h, q] * LT[h - pend0, q_col[q]]
                 for i in range(n):
-                    for j in range(i, n):
-                        Lam[i, j] = T2[i, j]
-                        Lam[j, i] = T2[i, j]
+                    x[i] = xm[i] - hr_fb[h, i]
+                    xs_hr[h, i] = x[i]
+            pend0, pend1 = 0, 0
+        _through_update(lam, lt, Lam, Lt, H, K, G, s, r0[k], r1[k], covariance, KL, W)
+        if k > 0:
+            _back_through_dense(lam, lt, Lam, Lt, Phi[k], covariance, T1)
+            if seg1[k] > seg0[k]:  # the high-rate samples between node k-1 and k
+                for h in range(seg1[k] - 1, seg0[k] - 1, -1):
+                    _through_update(lam, lt, Lam, Lt, H, K, G, s, hr_r0[h], hr_r1[h],
+                                    covariance, KL, W)
+                    for i in range(n):
+                        LT[h - seg0[k], i] = lt[i]
+                    _back_through_sparse(lam, lt, Lam, Lt, hr_F[h], f_ptr, f_col, f_act,
+                                         covariance, T1)
+                pend0, pend1 = seg0[k], seg1[k]
 
 
-def smooth(store, n_nodes: int, covariance: bool = True):
-    """Run :func:`mbf_backward` on the first ``n_nodes`` nodes of a
-    :class:`~insgnss.filter.store.NodeStore`; returns ``(xs_plus, xs_minus, Ps or None)``."""
+def smooth(store, n_nodes: int, covariance: bool = True, pattern=None):
+    """Run :func:`mbf_backward` on the first ``n_nodes`` nodes and all high-rate samples of a
+    :class:`~insgnss.filter.store.NodeStore` (``pattern``: the process model's F / Qd pattern,
+    :meth:`~insgnss.filter.strapdown_model.StrapdownModel.f_pattern`, when there are high-rate
+    samples); returns ``(xs_plus, xs_minus, Ps or None, xs_hr)``."""
     n = store.n
     xs_plus = np.zeros((n_nodes, n))
     xs_minus = np.zeros((n_nodes, n))
     Ps = np.empty((n_nodes, n, n)) if covariance else np.empty((1, n, n))
-    mbf_backward(store.Pf, store.Phi, store.fb, store.ptr, store.H, store.K, store.G, store.s,
-                 n_nodes, bool(covariance), xs_plus, xs_minus, Ps)
-    return xs_plus, xs_minus, (Ps if covariance else None)
+    n_hr = store.hr_count
+    xs_hr = np.zeros((n_hr, n))
+    if pattern is None:
+        e = np.zeros(0, np.int64)
+        pattern = (np.zeros(1, np.int64), e, e, e, e)
+    mbf_backward(store.Pf, store.Phi, store.fb, store.r0, store.r1, store.H, store.K, store.G,
+                 store.s, n_nodes, store.seg0, store.seg1, n_hr, store.hr_F, store.hr_Q,
+                 store.hr_fb, store.hr_r0, store.hr_r1, store.hr_ppi, store.hr_Pp, *pattern,
+                 bool(covariance), xs_plus, xs_minus, Ps, xs_hr)
+    return xs_plus, xs_minus, (Ps if covariance else None), xs_hr
 
 
 @njit(cache=True)

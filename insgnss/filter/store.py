@@ -2,8 +2,8 @@
 
 Nodes
 -----
-A *node* is a time at which the engine keeps the error-state covariance. Every filter epoch is a
-node; in a segment run by the compiled high-rate path every IMU sample is one. Node ``k`` holds
+A *node* is a time at which the engine keeps the error-state covariance: every filter epoch.
+Node ``k`` holds
 
 - ``t[k]``: its time;
 - ``Phi[k]``: the error transition from node ``k-1`` to ``k`` (``Phi[0] = I``);
@@ -17,11 +17,23 @@ node; in a segment run by the compiled high-rate path every IMU sample is one. N
 
 Updates
 -------
-For each node, the rows ``ptr[k] .. ptr[k+1]-1`` of the update arrays describe the (stacked)
+For each node, the rows ``r0[k] .. r1[k]-1`` of the update arrays describe the (stacked)
 update applied there: ``H`` (m, n), the gain ``K`` stored transposed (m, n), ``G = S^-1 H``
 (m, n) and ``s = S^-1 z`` (m). With ``Pp``, ``Pf``, ``Phi`` and ``fb`` this is everything the
 Rauch-Tung-Striebel form, the modified Bryson-Frazier form (:mod:`.smoother`) and an EM
 estimate of the noise parameters need (``R = S - H Pp H^T``).
+
+High-rate samples
+-----------------
+In a segment run by the compiled high-rate path (:mod:`.highrate`) every IMU sample is a
+smoother step, stored compactly (what the backward pass needs, no covariance): the samples
+``seg0[k] .. seg1[k]-1`` lie between nodes ``k-1`` and ``k``; sample ``i`` has its time
+``hr_t``, IMU row ``hr_row``, ``F dt`` of its interval at the structural non-zeros of the
+process model (``hr_F``, ``Phi = I + F dt``), ``Qd`` at its pattern entries (``hr_Q``), the
+feedback ``hr_fb`` and its update rows ``hr_r0 .. hr_r1-1``; where a gate recovery inflated
+its predicted covariance, that ``P(i|i-1)`` is ``hr_Pp[hr_ppi[i]]``. The covariance of the samples is
+written into the forward table by the compiled path; node ``k``'s ``Phi`` and ``Pp`` then refer
+to the last high-rate sample before it.
 
 Innovation log
 --------------
@@ -38,9 +50,11 @@ __all__ = ["NodeStore", "InnovationLog", "innovation_tables"]
 
 
 class NodeStore:
-    """Preallocated node arrays (capacity ``cap``) and growable update rows."""
+    """Preallocated node arrays (capacity ``cap``), the high-rate samples (capacity
+    ``cap_hr``; F and Qd at ``nnz`` and ``nq`` pattern entries) and growable update rows."""
 
-    def __init__(self, cap: int, n: int, n_par: int, rows: int = 64):
+    def __init__(self, cap: int, n: int, n_par: int, cap_hr: int = 0, nnz: int = 0,
+                 nq: int = 0, rows: int = 64):
         self.n = n
         self.t = np.empty(cap)
         self.Pf = np.empty((cap, n, n))
@@ -48,8 +62,21 @@ class NodeStore:
         self.Phi = np.empty((cap, n, n))
         self.fb = np.zeros((cap, n))
         self.par = np.empty((cap, n_par))
-        self.ptr = np.zeros(cap + 1, np.int64)
+        self.r0 = np.zeros(cap, np.int64)  # update rows of node k: r0[k] .. r1[k]-1
+        self.r1 = np.zeros(cap, np.int64)
+        self.seg0 = np.zeros(cap, np.int64)  # high-rate samples before node k: seg0 .. seg1-1
+        self.seg1 = np.zeros(cap, np.int64)
         self.count = 0  # nodes written
+        self.hr_t = np.empty(cap_hr)
+        self.hr_row = np.empty(cap_hr, np.int64)
+        self.hr_F = np.empty((cap_hr, nnz))
+        self.hr_Q = np.empty((cap_hr, nq))
+        self.hr_fb = np.empty((cap_hr, n))
+        self.hr_r0 = np.zeros(cap_hr, np.int64)
+        self.hr_r1 = np.zeros(cap_hr, np.int64)
+        self.hr_ppi = np.full(cap_hr, -1, np.int64)  # gate recovery: index into hr_Pp
+        self.hr_Pp = np.empty((0, n, n))
+        self.hr_count = 0
         self._alloc_rows(max(rows, 8))
         self.n_rows = 0
 
@@ -66,7 +93,16 @@ class NodeStore:
         """Make room for ``extra`` more update rows."""
         need = self.n_rows + extra
         if need > self.H.shape[0]:
-            self._alloc_rows(max(need, 2 * self.H.shape[0]))
+            self._alloc_rows(max(need, self.H.shape[0] + self.H.shape[0] // 2))
+
+    def add_hr_predicted(self, h: int, Pp) -> None:
+        """Keep ``P(i|i-1)`` of high-rate sample ``h`` (inflated by a gate recovery)."""
+        self.hr_ppi[h] = self.hr_Pp.shape[0]
+        self.hr_Pp = np.concatenate([self.hr_Pp, np.asarray(Pp, float)[None]])
+
+    def open(self, k: int) -> None:
+        """Start node ``k``: its update rows follow."""
+        self.r0[k] = self.n_rows
 
     def add_update(self, H, K, G, s) -> None:
         """Append the rows of one (stacked) update to the node being written."""
@@ -80,7 +116,7 @@ class NodeStore:
         self.n_rows = r + m
 
     def close(self, k: int, t: float, Phi, Pp, Pf, fb, par) -> None:
-        """Write node ``k`` (its update rows were added since the previous node)."""
+        """Write node ``k``."""
         self.t[k] = t
         self.Phi[k] = Phi
         self.Pp[k] = Pp
@@ -90,7 +126,10 @@ class NodeStore:
         else:
             self.fb[k] = fb
         self.par[k] = par
-        self.ptr[k + 1] = self.n_rows
+        self.r1[k] = self.n_rows
+        self.seg1[k] = self.hr_count
+        if k + 1 < self.seg0.size:
+            self.seg0[k + 1] = self.hr_count
         self.count = k + 1
 
 

@@ -34,10 +34,10 @@ import pandas as pd
 from .. import earth
 from ..errors import InvalidValueError
 from ..imu import coning_sculling, grade, increments
-from ..mechanization.strapdown import NAV_COLS, NavState, attitude_update_id
+from ..mechanization.strapdown import NAV_COLS, STEP_WORK_SHAPE, NavState, attitude_update_id
 from . import kernels
 from .measurements import NominalState
-from .models import StateLayout, process_model
+from .models import ERROR_DYNAMICS, StateLayout, process_model
 from .process import ProcessModelBase
 
 __all__ = ["StrapdownModel", "STD_COLS", "output_columns", "levelling_covariance",
@@ -134,6 +134,7 @@ class StrapdownModel(ProcessModelBase):
         self.gmodel = earth.gravity_model_id(config.gravity_model)
         self.aupd = attitude_update_id(config.attitude_update)
         self.sub_T = float(config.propagation_interval)
+        self.dynamics = ERROR_DYNAMICS[config.error_dynamics]
         self.levelling = bool(config.levelling_correlation)
         self.gravity_model = config.gravity_model
         self.pos = np.array([initial.lat, initial.lon, initial.height], float)
@@ -186,7 +187,7 @@ class StrapdownModel(ProcessModelBase):
             self.t, self.dth, self.dv, self.j, self.frac, t_end, self.pos, self.vel, self.C,
             self.pnom, self.i_sg, self.i_sa, self.gmodel, self.aupd, self.sub_T, self.Fint,
             self.Qint, self.sub_dt, pm.gyro_psd, pm.accel_psd, self.table, self.seg, node,
-            self.rates, pm.dyn_noise)
+            self.rates, pm.dyn_noise, self.dynamics)
         dur = t_end - self.t_last
         if self.has_decay:
             # the nominal of a Gauss-Markov parameter follows its mean, b' = -b / tau
@@ -241,23 +242,27 @@ class StrapdownModel(ProcessModelBase):
 
     def output(self, store, n_nodes: int, n_rows: int, smoothed=None) -> pd.DataFrame:
         """IMU-rate forward table (``smoothed=None``: completes the stored nominal table in
-        place) or smoothed table (``(xs_plus, xs_minus, Ps or None)``: a new table; the
+        place) or smoothed table (``(xs_plus, xs_minus, Ps or None, xs_hr)``: a new table; the
         smoothed std columns are NaN without smoothed covariances)."""
         cols = output_columns(self.layout)
         t = self.t
+        n_hr = store.hr_count
+        hr_node = np.searchsorted(store.seg1[:n_nodes], np.arange(n_hr), side="right")
         if smoothed is None:
             out = self.table
             if n_rows:
                 X = np.zeros((1, self.layout.n))  # unused: no correction
-                kernels.assemble_output(t, self.table, self.seg, self.post, store.t, store.Pf,
-                                        store.Pp, X, X, store.par, n_rows, False, out)
+                kernels.assemble_output(t, self.table, self.seg, self.post, store.t[:n_nodes],
+                                        store.Pf, store.Pp, X, X, store.par, n_rows, False, out,
+                                        X, hr_node)
         else:
             out = np.empty((n_rows, len(cols)))
             if n_rows:
-                xs_plus, xs_minus, Ps = smoothed
+                xs_plus, xs_minus, Ps, xs_hr = smoothed
                 P = store.Pf if Ps is None else Ps
-                kernels.assemble_output(t, self.table, self.seg, self.post, store.t, P, P,
-                                        xs_plus, xs_minus, store.par, n_rows, True, out)
+                kernels.assemble_output(t, self.table, self.seg, self.post, store.t[:n_nodes], P,
+                                        P, xs_plus, xs_minus, store.par, n_rows, True, out,
+                                        xs_hr, hr_node)
                 if Ps is None:
                     out[:, 9:18] = np.nan
                     out[:, 18 + self.n_par:] = np.nan
@@ -268,16 +273,50 @@ class StrapdownModel(ProcessModelBase):
         return NavState(self.pos[0], self.pos[1], self.pos[2], self.vel.copy(), self.C.copy(),
                         float(time))
 
+    def f_pattern(self):
+        """Structural non-zeros of the per-interval ``F dt`` and ``Qd`` of this model:
+        ``(f_ptr, f_col, f_act, q_row, q_col)`` for :func:`insgnss.filter.highrate.
+        _first_order_propagation` (rows ``f_act`` of F with the columns
+        ``f_col[f_ptr[a]:f_ptr[a+1]]``; the entries ``(q_row, q_col)`` of Qd).
+
+        Found by evaluating the interval step at a random, generic nominal (every term that
+        can be non-zero is, with probability one) plus the parameter decays and the constant
+        blocks of coupled augmenting states."""
+        n = self.layout.n
+        rng = np.random.default_rng(12345)
+        F = np.zeros((n, n))
+        Qg, Qa = np.zeros((3, 3)), np.zeros((3, 3))
+        C = np.linalg.qr(rng.normal(size=(3, 3)))[0]
+        kernels.interval_step(np.array([0.7, 0.2, 150.0]), rng.normal(size=3) * 5, C,
+                              rng.normal(size=self.n_par) * 1e-3, rng.normal(size=3) * 1e-2,
+                              rng.normal(size=3) * 1e-1, 1.0, 0.01, self.i_sg, self.i_sa,
+                              self.gmodel, self.aupd, F, Qg, Qa, np.ones(3), np.ones(3),
+                              np.ones(2), np.empty(3), np.empty(3),
+                              np.empty(STEP_WORK_SHAPE), self.dynamics)
+        mask = F != 0.0
+        mask[np.diag_indices(n)] |= self.noise.decay > 0.0
+        if self.noise.Fx is not None:
+            mask |= self.noise.Fx != 0.0
+        rows = np.flatnonzero(mask.any(axis=1))
+        f_ptr = np.concatenate([[0], np.cumsum(mask[rows].sum(axis=1))]).astype(np.int64)
+        f_col = np.concatenate([np.flatnonzero(mask[r]) for r in rows]).astype(np.int64)
+        qm = np.zeros((n, n), bool)
+        qm[np.diag_indices(n)] = True
+        qm[3:9, 3:9] |= np.kron(np.eye(2, dtype=bool), np.ones((3, 3), bool))
+        if self.noise.Qx is not None:
+            qm |= self.noise.Qx != 0.0
+        q_row, q_col = (a.astype(np.int64) for a in np.nonzero(qm))
+        return f_ptr, f_col, rows.astype(np.int64), q_row, q_col
+
     def high_rate_args(self):
-        """``(model id, t, dth, dv, pos, vel, C, pnom, i_sg, i_sa, gravity model, attitude
-        update, gyro PSD, accel PSD, dynamic noise, decay, qdiag, Fx, Qx, table, seg, post,
-        rates)``
-        for :func:`insgnss.filter.highrate.dense_segment`."""
+        """``(model id, error-dynamics id, t, dth, dv, pos, vel, C, pnom, i_sg, i_sa, gravity
+        model, attitude update, gyro PSD, accel PSD, dynamic noise, decay, qdiag, Fx, Qx,
+        table, seg, post, rates)`` for :func:`insgnss.filter.highrate.dense_segment`."""
         pm = self.noise
         n = self.layout.n
         Fx = pm.Fx if pm.Fx is not None else np.zeros((0, n))
         Qx = pm.Qx if pm.Qx is not None else np.zeros((0, n))
-        return (MODEL_LLF, self.t, self.dth, self.dv, self.pos, self.vel, self.C, self.pnom,
-                self.i_sg, self.i_sa, self.gmodel, self.aupd, pm.gyro_psd, pm.accel_psd,
+        return (MODEL_LLF, self.dynamics, self.t, self.dth, self.dv, self.pos, self.vel, self.C,
+                self.pnom, self.i_sg, self.i_sa, self.gmodel, self.aupd, pm.gyro_psd, pm.accel_psd,
                 pm.dyn_noise, pm.decay, pm.qdiag, Fx, Qx, self.table, self.seg, self.post,
                 self.rates)
