@@ -35,6 +35,7 @@ from filter_sim import (  # noqa: E402
 
 from insgnss.filter import FilterConfig, GnssPosition, GnssVelocity, run_filter  # noqa: E402
 from insgnss.imu import grade  # noqa: E402
+from insgnss.stats import chi2_ppf  # noqa: E402
 
 
 def make_case(hours: float, rate: float, seed: int = 0):
@@ -67,7 +68,6 @@ def child(hours, rate):
 def mc(runs: int, duration: float, rate: float):
     """NEES (pos, vel, att) and NIS averaged over runs vs two-sided 95 % chi-square bounds."""
     from filter_sim import error_vector_at
-    from scipy.stats import chi2
 
     model = grade("tactical")
     truth = car_truth(duration, rate)
@@ -98,7 +98,7 @@ def mc(runs: int, duration: float, rate: float):
           f"pos+vel ({elapsed:.1f} s)")
     for name, arr in list(nees.items()) + list(nis.items()):
         a = np.mean(np.array(arr), axis=0)
-        lo, hi = chi2.ppf([0.025, 0.975], 3 * runs) / runs
+        lo, hi = chi2_ppf([0.025, 0.975], 3 * runs) / runs
         inside = np.mean((a >= lo) & (a <= hi))
         kind = "NEES" if name in nees else "NIS "
         print(f"  {kind} {name:9s}: mean {a.mean():5.2f} (dof 3), bounds [{lo:.2f}, {hi:.2f}], "

@@ -19,7 +19,6 @@ import time
 from pathlib import Path
 
 import numpy as np
-from scipy.stats import chi2
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
 
@@ -29,6 +28,7 @@ from insgnss.filter import FilterConfig, GnssPosition, GnssVelocity  # noqa: E40
 from insgnss.filter.riss_model import run_riss_filter  # noqa: E402
 from insgnss.imu import grade  # noqa: E402
 from insgnss.mechanization.riss import mechanize_riss, riss_inputs  # noqa: E402
+from insgnss.stats import chi2_ppf  # noqa: E402
 
 
 def throughput(duration: float) -> None:
@@ -67,8 +67,8 @@ def nees_mc(grade_name: str, runs: int, duration: float) -> None:
                                        drive=drive)
         n = 11 if reported else res.layout.n
         m = ne.mean(axis=0)[1:]
-        lo = chi2.ppf(0.025, runs * n) / runs
-        hi = chi2.ppf(0.975, runs * n) / runs
+        lo = chi2_ppf(0.025, runs * n) / runs
+        hi = chi2_ppf(0.975, runs * n) / runs
         inside = np.mean((m >= lo) & (m <= hi))
         what = "reported quantities" if reported else "full error state"
         print(f"{grade_name:8s} {what:19s} n={n:2d}: mean NEES {m.mean():6.2f}, bounds "

@@ -92,7 +92,7 @@ def nees_blocks(x: np.ndarray, P: np.ndarray) -> np.ndarray:
 
 def chi2_bounds(dof: np.ndarray, n: np.ndarray, confidence: float) -> tuple[np.ndarray, np.ndarray]:
     """Two-sided bounds of the average of ``n`` chi-square(``dof``) variables."""
-    from scipy.stats import chi2
+    from .stats import chi2_ppf
 
     dof = np.asarray(dof, float)
     n = np.asarray(n, float)
@@ -100,6 +100,6 @@ def chi2_bounds(dof: np.ndarray, n: np.ndarray, confidence: float) -> tuple[np.n
     ok = (n > 0) & (dof > 0)
     nd = np.where(ok, n * dof, 1.0)
     nn = np.where(ok, n, 1.0)
-    lo = np.where(ok, chi2.ppf(a, nd) / nn, np.nan)
-    hi = np.where(ok, chi2.ppf(1.0 - a, nd) / nn, np.nan)
+    lo = np.where(ok, chi2_ppf(a, nd) / nn, np.nan)
+    hi = np.where(ok, chi2_ppf(1.0 - a, nd) / nn, np.nan)
     return lo, hi

@@ -198,3 +198,30 @@ def test_discretize_composition_equals_sequential_propagation():
         kernels.discretize(Fint[s:s + 1], Qint[s:s + 1], np.array([T]), 1, decay, qdiag, 1, Phi_s, Qd_s)
         P = Phi_s @ P @ Phi_s.T + Qd_s
     assert np.allclose(Phi @ P0 @ Phi.T + Qd, P, rtol=1e-12, atol=1e-15)
+
+
+def test_coupled_extra_state_block_discretizes_exactly():
+    """An augmenting block with its own dynamics and noise (a GNSS receiver clock: bias [m],
+    drift [m/s], Phi = [[1, dt], [0, 1]]) gets the exact transition and the exact integrated
+    noise ``[[q_b T + q_d T^3/3, q_d T^2/2], [q_d T^2/2, q_d T]]``, also composed over
+    sub-intervals, and is untouched by the navigation states."""
+    qb, qd = 0.4, 0.02
+    clock = ExtraState("clock", 2, initial_std=(30.0, 1.0), labels=("clock_bias", "clock_drift"),
+                       dynamics=((0.0, 1.0), (0.0, 0.0)), noise=((qb, 0.0), (0.0, qd)))
+    lay = StateLayout(False, [clock])
+    pm = process_model(lay, grade("tactical"))
+    assert lay.n == 17 and pm.Fx is not None and pm.Qx is not None
+    n, T, ns = lay.n, 0.1, 5
+    Fint = np.zeros((ns, n, n))
+    Qint = np.zeros((ns, 2, 3, 3))
+    Phi, Qd = np.eye(n), np.zeros((n, n))
+    kernels.discretize(Fint, Qint, np.full(ns, T), ns, pm.decay, pm.qdiag, 0, Phi, Qd, pm.Fx,
+                       pm.Qx)
+    c = lay["clock"]
+    tt = ns * T
+    np.testing.assert_allclose(Phi[c, c], [[1.0, tt], [0.0, 1.0]], atol=1e-15)
+    np.testing.assert_allclose(Qd[c, c], [[qb * tt + qd * tt**3 / 3, qd * tt**2 / 2],
+                                          [qd * tt**2 / 2, qd * tt]], rtol=1e-12)
+    assert np.all(Phi[c, :15] == 0) and np.all(Qd[c, :15] == 0)
+    with pytest.raises(ValueError):
+        ExtraState("clock", 2, dynamics=((0.0, 1.0),))

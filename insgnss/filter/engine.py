@@ -266,8 +266,9 @@ class FilterResult:
         innov_std`` and ``names``: the measurement type of each ``tid``).
     high_rate : dict or None
         The samples of the compiled high-rate path (times, IMU rows, ``F dt`` and ``Qd`` at the
-        process model's ``pattern``, feedback, update rows; ``seg0[e] .. seg1[e]-1`` lie
-        before node ``e``), None without high-rate measurements.
+        process model's ``pattern``, feedback, update rows ``r0 .. r1-1``, and ``Pp[Pp_index]``
+        where a gate recovery inflated ``P(i|i-1)``; ``seg0[e] .. seg1[e]-1`` lie before node
+        ``e``), None without high-rate measurements.
     """
 
     forward: pd.DataFrame
@@ -542,7 +543,8 @@ def _finish(run: _Run, completed: int, error, t_start: float) -> FilterResult:
                      "seg0": store.seg0[:n_ok], "seg1": store.seg1[:n_ok],
                      "F": store.hr_F[:n_hr], "Q": store.hr_Q[:n_hr],
                      "feedback": store.hr_fb[:n_hr], "r0": store.hr_r0[:n_hr],
-                     "r1": store.hr_r1[:n_hr], "pattern": run.hr.pattern}
+                     "r1": store.hr_r1[:n_hr], "pattern": run.hr.pattern,
+                     "Pp_index": store.hr_ppi[:n_hr], "Pp": store.hr_Pp}
     return FilterResult(
         forward=forward, smoothed=smoothed, innovations=innovations, rejected=rejected,
         complete=error is None, timing=timing, layout=model.layout,

@@ -30,6 +30,7 @@ import numpy as np
 from numba import njit
 
 from ..stats import chi2_ppf
+from .linalg import _innovation_cov, cholesky_into
 
 __all__ = ["GateTable", "gate_step", "inflate_for", "nis", "nis_into", "ACCEPT", "REJECT",
            "RECOVER"]
@@ -68,17 +69,8 @@ def nis_into(S, y, L, w):
     """Normalised innovation squared ``y^T S^-1 y`` by Cholesky (scratch ``L`` (m, m), ``w``
     (m,) at least); NaN if S is not PD."""
     m = y.shape[0]
-    for i in range(m):
-        for k in range(i + 1):
-            v = S[i, k]
-            for q in range(k):
-                v -= L[i, q] * L[k, q]
-            if i == k:
-                if not v > 0.0:
-                    return np.nan
-                L[i, i] = np.sqrt(v)
-            else:
-                L[i, k] = v / L[k, k]
+    if not cholesky_into(S, L, m):
+        return np.nan
     out = 0.0
     for i in range(m):
         v = y[i]
@@ -136,18 +128,7 @@ def inflate_for(P, H, R, z, thr, n_nav):
     S = np.empty((m, m))
     r2 = np.sqrt(2.0)
     for it in range(61):
-        for i in range(m):
-            for k in range(n):
-                v = 0.0
-                for q in range(n):
-                    v += H[i, q] * P[q, k]
-                HP[i, k] = v
-        for i in range(m):
-            for k in range(m):
-                v = R[i, k]
-                for q in range(n):
-                    v += HP[i, q] * H[k, q]
-                S[i, k] = v
+        _innovation_cov(H, P, R, m, HP, S)
         if it == 60 or not seen or nis(S, z) <= 0.5 * thr:
             break
         for i in range(n_nav):

@@ -19,6 +19,7 @@ import numpy as np
 from numba import njit
 
 from ..errors import FilterHealthError
+from .linalg import cholesky_into
 
 __all__ = ["check_covariance", "is_positive_definite", "RunawayNis"]
 
@@ -27,19 +28,7 @@ __all__ = ["check_covariance", "is_positive_definite", "RunawayNis"]
 def is_positive_definite(P):
     """True if the symmetric matrix P has a Cholesky factorisation (all pivots > 0)."""
     n = P.shape[0]
-    L = np.empty((n, n))
-    for i in range(n):
-        for k in range(i + 1):
-            v = P[i, k]
-            for q in range(k):
-                v -= L[i, q] * L[k, q]
-            if i == k:
-                if not v > 0.0:
-                    return False
-                L[i, i] = np.sqrt(v)
-            else:
-                L[i, k] = v / L[k, k]
-    return True
+    return cholesky_into(P, np.empty((n, n)), n)
 
 
 def check_covariance(x, P, time: float, what: str, full: bool = True) -> None:

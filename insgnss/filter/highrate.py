@@ -48,6 +48,7 @@ from ..errors import ConfigError, FilterHealthError
 from ..mechanization.strapdown import STEP_WORK_SHAPE
 from . import gating, health
 from .kernels import _euler_std, apply_feedback_into, interval_step, store_nav
+from .linalg import _innovation_cov, cholesky_into, tri_solve
 from .measurements import Measurement, evaluate_compiled
 
 __all__ = ["HighRate", "dense_segment"]
@@ -115,68 +116,6 @@ def _first_order_propagation(P, F, Qd, f_ptr, f_col, f_act, q_row, q_col, A, B):
 
 
 @njit(cache=True)
-def _forward_sub(L, B, m, out):
-    """``out[:m] = L^-1 B[:m]`` for lower-triangular ``L`` (m x m); row operations."""
-    p = B.shape[1]
-    for i in range(m):
-        for c in range(p):
-            out[i, c] = B[i, c]
-        for q in range(i):
-            lq = L[i, q]
-            for c in range(p):
-                out[i, c] -= lq * out[q, c]
-        li = 1.0 / L[i, i]
-        for c in range(p):
-            out[i, c] *= li
-
-
-@njit(cache=True)
-def _back_sub(L, B, m, out):
-    """``out[:m] = L^-T B[:m]`` for lower-triangular ``L`` (m x m); row operations."""
-    p = B.shape[1]
-    for i in range(m - 1, -1, -1):
-        for c in range(p):
-            out[i, c] = B[i, c]
-        for q in range(i + 1, m):
-            lq = L[q, i]
-            for c in range(p):
-                out[i, c] -= lq * out[q, c]
-        li = 1.0 / L[i, i]
-        for c in range(p):
-            out[i, c] *= li
-
-
-@njit(cache=True)
-def _hp(H, P, m, out):
-    """``out[:m] = H[:m] P`` skipping the zeros of H."""
-    n = P.shape[0]
-    for a in range(m):
-        for j in range(n):
-            out[a, j] = 0.0
-        for q in range(n):
-            h = H[a, q]
-            if h != 0.0:
-                for j in range(n):
-                    out[a, j] += h * P[q, j]
-
-
-@njit(cache=True)
-def _innovation_cov(H, P, R, m, HP, S):
-    """``HP = H P`` and ``S = H P H^T + R`` for the first ``m`` rows."""
-    n = P.shape[0]
-    _hp(H, P, m, HP)
-    for a in range(m):
-        for b in range(a + 1):
-            v = R[a, b]
-            for q in range(n):
-                h = H[b, q]
-                if h != 0.0:
-                    v += HP[a, q] * h
-            S[a, b] = v
-            S[b, a] = v
-
-
-@njit(cache=True)
 def _kalman_update(P, H, z, m, HP, S, x, Kt, G, s, L, W, V, want_G):
     """Stacked Kalman update with the first ``m`` rows of ``H``, ``z`` and their
     ``HP = H P``, ``S = H P H^T + R`` (:func:`_innovation_cov`).
@@ -188,22 +127,13 @@ def _kalman_update(P, H, z, m, HP, S, x, Kt, G, s, L, W, V, want_G):
     cost). Returns False (P unchanged) if ``S`` is not positive definite.
     """
     n = P.shape[0]
-    for i in range(m):  # Cholesky S = L L^T
-        for k in range(i + 1):
-            v = S[i, k]
-            for q in range(k):
-                v -= L[i, q] * L[k, q]
-            if i == k:
-                if not v > 0.0:
-                    return False
-                L[i, i] = np.sqrt(v)
-            else:
-                L[i, k] = v / L[k, k]
-    _forward_sub(L, HP, m, W)
-    _back_sub(L, W, m, Kt)
+    if not cholesky_into(S, L, m):  # S = L L^T
+        return False
+    tri_solve(L, HP, m, W, False)
+    tri_solve(L, W, m, Kt, True)
     if want_G:
-        _forward_sub(L, H, m, V)
-        _back_sub(L, V, m, G)
+        tri_solve(L, H, m, V, False)
+        tri_solve(L, V, m, G, True)
     for i in range(m):  # s = S^-1 z
         v = z[i]
         for q in range(i):
@@ -465,7 +395,7 @@ def dense_segment(model, dynamics, t, dth, dv, pos, vel, C, pnom, i_sg, i_sa, gm
                 code = NOT_PD
                 fail_t = t[j]
                 break
-            if check and (h - hr0) % 64 == 0 and not _cholesky_ok(P, Lc):
+            if check and (h - hr0) % 64 == 0 and not cholesky_into(P, Lc, n):
                 code = NOT_PD
                 fail_t = t[j]
                 break
@@ -509,24 +439,6 @@ def dense_segment(model, dynamics, t, dth, dv, pos, vel, C, pnom, i_sg, i_sa, gm
     status[2] = r - row
     status[3] = n_log
     return j, frac, fail_t, fail_v, fail_tid
-
-
-@njit(cache=True)
-def _cholesky_ok(P, L):
-    """True if P is positive definite (Cholesky into the scratch L)."""
-    n = P.shape[0]
-    for i in range(n):
-        for k in range(i + 1):
-            v = P[i, k]
-            for q in range(k):
-                v -= L[i, q] * L[k, q]
-            if i == k:
-                if not v > 0.0:
-                    return False
-                L[i, i] = np.sqrt(v)
-            else:
-                L[i, k] = v / L[k, k]
-    return True
 
 
 class HighRate:

@@ -19,6 +19,7 @@ from numba import njit
 from ..attitude import euler_to_dcm_nb, rotvec_to_dcm_nb
 from ..earth import gravity_somigliana, radii
 from ..mechanization.strapdown import STEP_WORK_SHAPE, strapdown_step
+from .linalg import _copy, _mm, _mmspt, _sparse, _spmm
 from .models import accumulate_error_dynamics, accumulate_short_term_dynamics
 
 DISC_SECOND_ORDER = 0
@@ -182,89 +183,6 @@ def propagate_nominal(t, dth, dv, j, frac, t_end, pos, vel, C, pnom, i_sg, i_sa,
             rates[1, i] = sum_th[i] / sum_dt
             rates[3, i] = sum_dv[i] / sum_dt
     return j, frac, s + 1
-
-
-# --- small dense linear algebra (explicit loops: fast for n <= 30 and quick to compile; slice
-# assignments such as ``A[:, :] = B`` are avoided on purpose: each costs seconds of compilation)
-@njit(cache=True)
-def _copy(src, dst):
-    """``dst[...] = src`` for 2-D arrays of equal shape."""
-    for i in range(src.shape[0]):
-        for k in range(src.shape[1]):
-            dst[i, k] = src[i, k]
-
-
-@njit(cache=True)
-def _fill(a, v):
-    """``a[...] = v`` for a 2-D array."""
-    for i in range(a.shape[0]):
-        for k in range(a.shape[1]):
-            a[i, k] = v
-
-
-@njit(cache=True)
-def _mm(A, B, out):
-    """``out = A @ B`` (out must not alias A or B)."""
-    n, m = A.shape
-    p = B.shape[1]
-    for i in range(n):
-        for k in range(p):
-            out[i, k] = 0.0
-        for j in range(m):
-            a = A[i, j]
-            if a != 0.0:
-                for k in range(p):
-                    out[i, k] += a * B[j, k]
-
-
-@njit(cache=True)
-def _mmt(A, B, out):
-    """``out = A @ B.T``."""
-    n, m = A.shape
-    p = B.shape[0]
-    for i in range(n):
-        for k in range(p):
-            v = 0.0
-            for j in range(m):
-                v += A[i, j] * B[k, j]
-            out[i, k] = v
-
-
-@njit(cache=True)
-def _sparse(A, ri, ci, vals):
-    """Non-zero entries of A into (ri, ci, vals); returns their number."""
-    k = 0
-    for i in range(A.shape[0]):
-        for j in range(A.shape[1]):
-            v = A[i, j]
-            if v != 0.0:
-                ri[k] = i
-                ci[k] = j
-                vals[k] = v
-                k += 1
-    return k
-
-
-@njit(cache=True)
-def _spmm(ri, ci, vals, nnz, X, out):
-    """``out = A @ X`` for sparse A given by its entries."""
-    _fill(out, 0.0)
-    p = X.shape[1]
-    for q in range(nnz):
-        i, j, a = ri[q], ci[q], vals[q]
-        for k in range(p):
-            out[i, k] += a * X[j, k]
-
-
-@njit(cache=True)
-def _mmspt(X, ri, ci, vals, nnz, out):
-    """``out = X @ A^T`` for sparse A given by its entries."""
-    _fill(out, 0.0)
-    m = X.shape[0]
-    for q in range(nnz):
-        r, c, a = ri[q], ci[q], vals[q]
-        for i in range(m):
-            out[i, r] += X[i, c] * a
 
 
 @njit(cache=True)

@@ -56,7 +56,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from .kernels import _mm
+from .linalg import _mm, cholesky_into, congruence_t, matvec_t, tri_solve
 
 __all__ = ["mbf_backward", "rts_error_state", "smooth"]
 
@@ -144,22 +144,10 @@ def _back_through_sparse(lam, lt, Lam, Lt, Fv, f_ptr, f_col, f_act, covariance, 
 @njit(cache=True)
 def _back_through_dense(lam, lt, Lam, Lt, F, covariance, T1):
     """``lambda^ = Phi^T lambda~``, ``Lambda^ = Phi^T Lambda~ Phi`` for a dense ``Phi``."""
-    n = lam.shape[0]
-    for i in range(n):
-        v = 0.0
-        for j in range(n):
-            v += F[j, i] * lt[j]
-        lam[i] = v
+    matvec_t(F, lt, lam)
     if not covariance:
         return
-    _mm(Lt, F, T1)  # Lt Phi
-    for i in range(n):
-        for j in range(i, n):
-            v = 0.0
-            for q in range(n):
-                v += F[q, i] * T1[q, j]
-            Lam[i, j] = v
-            Lam[j, i] = v
+    congruence_t(F, Lt, T1, Lam)  # Phi^T Lt Phi
 
 
 @njit(cache=True)
@@ -184,6 +172,7 @@ def mbf_backward(Pf, Phi, fb, r0, r1, H, K, G, s, n_nodes, seg0, seg1, n_hr, hr_
     Lam = np.zeros((n, n))
     Lt = np.empty((n, n))
     T1 = np.empty((n, n))
+    T2 = np.empty((n, n))
     m_max = 1
     for k in range(n_nodes):
         m_max = max(m_max, r1[k] - r0[k])
@@ -218,14 +207,10 @@ def mbf_backward(Pf, Phi, fb, r0, r1, H, K, G, s, n_nodes, seg0, seg1, n_hr, hr_
             xs_plus[k, i] = -v
             xs_minus[k, i] = fb[k, i] - v
         if covariance:
-            _mm(P, Lam, T1)
+            congruence_t(P, Lam, T1, T2)  # P Lam P (P symmetric)
             for i in range(n):
-                for j in range(i, n):
-                    v = 0.0
-                    for q in range(n):
-                        v += T1[i, q] * P[q, j]
-                    Ps[k, i, j] = P[i, j] - v
-                    Ps[k, j, i] = Ps[k, i, j]
+                for j in range(n):
+                    Ps[k, i, j] = P[i, j] - T2[i, j]
         if pend1 > pend0:  # rebuild the smoothed errors of the segment after node k
             for i in range(n):
                 x[i] = xs_plus[k, i]
@@ -290,29 +275,10 @@ def smooth(store, n_nodes: int, covariance: bool = True, pattern=None):
 def _chol_solve(P, B, L, out):
     """``out = P^-1 B`` for symmetric positive definite P (Cholesky); False if not PD."""
     n = P.shape[0]
-    for i in range(n):
-        for k in range(i + 1):
-            v = P[i, k]
-            for q in range(k):
-                v -= L[i, q] * L[k, q]
-            if i == k:
-                if not v > 0.0:
-                    return False
-                L[i, i] = np.sqrt(v)
-            else:
-                L[i, k] = v / L[k, k]
-    m = B.shape[1]
-    for c in range(m):
-        for i in range(n):  # forward
-            v = B[i, c]
-            for q in range(i):
-                v -= L[i, q] * out[q, c]
-            out[i, c] = v / L[i, i]
-        for i in range(n - 1, -1, -1):  # backward
-            v = out[i, c]
-            for q in range(i + 1, n):
-                v -= L[q, i] * out[q, c]
-            out[i, c] = v / L[i, i]
+    if not cholesky_into(P, L, n):
+        return False
+    tri_solve(L, B, n, out, False)
+    tri_solve(L, out, n, out, True)
     return True
 
 
@@ -356,25 +322,15 @@ def rts_backward(Pf, Pp, Phi, fb, n_ep, xs_plus, xs_minus, Ps):
                 for k in range(n):
                     Ps[e, i, k] = Pf[e, i, k]
         else:
-            for i in range(n):
-                v = 0.0
-                for k in range(n):
-                    v += At[k, i] * xs_minus[e + 1, k]
-                xs_plus[e, i] = v
+            matvec_t(At, xs_minus[e + 1], xs_plus[e])
             for i in range(n):
                 for k in range(n):
                     D[i, k] = Ps[e + 1, i, k] - Pp[e + 1, i, k]
             # Ps = Pf + A D A^T = Pf + At^T D At
-            _mm(D, At, T1)  # D At
+            congruence_t(At, D, T1, B)
             for i in range(n):
-                for k in range(i, n):
-                    v = 0.0
-                    for q in range(n):
-                        v += At[q, i] * T1[q, k]
-                    Ps[e, i, k] = Pf[e, i, k] + v
-            for i in range(n):
-                for k in range(i + 1, n):
-                    Ps[e, k, i] = Ps[e, i, k]
+                for k in range(n):
+                    Ps[e, i, k] = Pf[e, i, k] + B[i, k]
         for i in range(n):
             xs_minus[e, i] = xs_plus[e, i] + fb[e, i]
     return bad

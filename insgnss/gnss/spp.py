@@ -60,9 +60,9 @@ RESIDUAL_COLUMNS = ["time", "sat", "signal", "el", "az", "cn0", "pr_residual", "
 
 @functools.lru_cache(maxsize=256)
 def _chi2_threshold(p_fa: float, dof: int) -> float:
-    from scipy.stats import chi2  # lazy: scipy.stats costs ~1 s to import
+    from ..stats import chi2_ppf
 
-    return float(chi2.ppf(1.0 - p_fa, dof))
+    return float(chi2_ppf(1.0 - p_fa, dof))
 
 
 @dataclass

@@ -1,0 +1,155 @@
+"""Small dense linear algebra of the compiled filter code (numba): explicit loops, fast for
+n <= 30 and quick to compile (slice assignments such as ``A[:, :] = B`` are avoided on purpose:
+each costs seconds of compilation). One implementation each, shared by the strapdown kernels,
+the high-rate path, gating, health checks and the smoother."""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+
+@njit(cache=True)
+def cholesky_into(A, L, m):
+    """Cholesky factor ``L`` (lower) of the leading ``m x m`` block of the symmetric ``A``;
+    False (L partly written) if it is not positive definite."""
+    for i in range(m):
+        for k in range(i + 1):
+            v = A[i, k]
+            for q in range(k):
+                v -= L[i, q] * L[k, q]
+            if i == k:
+                if not v > 0.0:
+                    return False
+                L[i, i] = np.sqrt(v)
+            else:
+                L[i, k] = v / L[k, k]
+    return True
+
+
+@njit(cache=True)
+def _copy(src, dst):
+    """``dst[...] = src`` for 2-D arrays of equal shape."""
+    for i in range(src.shape[0]):
+        for k in range(src.shape[1]):
+            dst[i, k] = src[i, k]
+
+
+@njit(cache=True)
+def _fill(a, v):
+    """``a[...] = v`` for a 2-D array."""
+    for i in range(a.shape[0]):
+        for k in range(a.shape[1]):
+            a[i, k] = v
+
+
+@njit(cache=True)
+def _mm(A, B, out):
+    """``out = A @ B`` skipping the zeros of A (out must not alias A or B)."""
+    n, m = A.shape
+    p = B.shape[1]
+    for i in range(n):
+        for k in range(p):
+            out[i, k] = 0.0
+        for j in range(m):
+            a = A[i, j]
+            if a != 0.0:
+                for k in range(p):
+                    out[i, k] += a * B[j, k]
+
+
+@njit(cache=True)
+def _sparse(A, ri, ci, vals):
+    """Non-zero entries of A into (ri, ci, vals); returns their number."""
+    k = 0
+    for i in range(A.shape[0]):
+        for j in range(A.shape[1]):
+            v = A[i, j]
+            if v != 0.0:
+                ri[k] = i
+                ci[k] = j
+                vals[k] = v
+                k += 1
+    return k
+
+
+@njit(cache=True)
+def _spmm(ri, ci, vals, nnz, X, out):
+    """``out = A @ X`` for sparse A given by its entries."""
+    _fill(out, 0.0)
+    p = X.shape[1]
+    for q in range(nnz):
+        i, j, a = ri[q], ci[q], vals[q]
+        for k in range(p):
+            out[i, k] += a * X[j, k]
+
+
+@njit(cache=True)
+def _mmspt(X, ri, ci, vals, nnz, out):
+    """``out = X @ A^T`` for sparse A given by its entries."""
+    _fill(out, 0.0)
+    m = X.shape[0]
+    for q in range(nnz):
+        r, c, a = ri[q], ci[q], vals[q]
+        for i in range(m):
+            out[i, r] += X[i, c] * a
+
+
+@njit(cache=True)
+def tri_solve(L, B, m, out, transpose):
+    """``out[:m] = L^-1 B[:m]`` (``transpose``: ``L^-T B[:m]``) for lower-triangular ``L``
+    (m x m), by row operations (``out`` may be ``B``)."""
+    p = B.shape[1]
+    for ii in range(m):
+        i = m - 1 - ii if transpose else ii
+        for c in range(p):
+            out[i, c] = B[i, c]
+        q0, q1 = (i + 1, m) if transpose else (0, i)
+        for q in range(q0, q1):
+            lq = L[q, i] if transpose else L[i, q]
+            for c in range(p):
+                out[i, c] -= lq * out[q, c]
+        li = 1.0 / L[i, i]
+        for c in range(p):
+            out[i, c] *= li
+
+
+@njit(cache=True)
+def matvec_t(A, x, out):
+    """``out = A^T x``."""
+    n, p = A.shape
+    for i in range(p):
+        v = 0.0
+        for j in range(n):
+            v += A[j, i] * x[j]
+        out[i] = v
+
+
+@njit(cache=True)
+def _innovation_cov(H, P, R, m, HP, S):
+    """``HP = H P`` and ``S = H P H^T + R`` for the first ``m`` rows."""
+    n = P.shape[0]
+    _mm(H[:m], P, HP[:m])
+    for a in range(m):
+        for b in range(a + 1):
+            v = R[a, b]
+            for q in range(n):
+                h = H[b, q]
+                if h != 0.0:
+                    v += HP[a, q] * h
+            S[a, b] = v
+            S[b, a] = v
+
+
+@njit(cache=True)
+def congruence_t(A, X, T1, out):
+    """``out = A^T X A`` for symmetric ``X`` (``T1``: scratch for ``X A``); symmetric result."""
+    n = A.shape[0]
+    _mm(X, A, T1)
+    for i in range(n):
+        for j in range(i, n):
+            v = 0.0
+            for q in range(n):
+                v += A[q, i] * T1[q, j]
+            out[i, j] = v
+            out[j, i] = v

@@ -1,0 +1,170 @@
+"""The engine's compiled high-rate path: same results as the Python update path, its smoother
+equals the RTS smoother over every IMU sample, gating/recovery/health on the compiled path,
+and what it refuses."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from filter_sim import car_truth, corrupt_imu, gnss_from_truth, nav_errors, perturbed_initial
+
+from insgnss.errors import ConfigError
+from insgnss.filter import BodyVelocity, FilterConfig, GnssPosition, Zaru, Zupt, run_filter
+from insgnss.filter.smoother import rts_error_state
+from insgnss.imu import grade
+
+
+@pytest.fixture(scope="module")
+def car():
+    """A car with two 15 s stops, tactical IMU, 1 Hz GNSS position."""
+    truth = car_truth(150.0, 100.0, stops_after=(0, 1), stop_duration=15.0)
+    rng = np.random.default_rng(11)
+    imu, _ = corrupt_imu(truth, grade("tactical"), rng)
+    gnss = gnss_from_truth(truth, rng)
+    init, _ = perturbed_initial(truth, rng, 1.0, 0.1, (0.005, 0.005, 0.02))
+    t = imu.index.to_numpy()
+    still = truth["stationary"].to_numpy(bool)
+    return truth, imu, gnss, init, t, still
+
+
+def _config(**kw):
+    return FilterConfig(imu_model="tactical", initial_att_std=(0.005, 0.005, 0.02),
+                        propagation_interval=0.01, **kw)
+
+
+def _meas(gnss, t, still, high_rate):
+    ts = t[still][1:]
+    moving = t[~still & (t > t[0])][::5]
+    return [GnssPosition(gnss), Zupt(ts, std=0.01, high_rate=high_rate),
+            Zaru(ts, std=1e-4, average=False, high_rate=high_rate),
+            BodyVelocity(moving, 0.0, axes=(0, 2), std=0.05, name="nhc",
+                         misalignment_state="mis", high_rate=high_rate)]
+
+
+def test_compiled_path_agrees_with_python_path(car):
+    """ZUPT and ZARU at every still IMU sample and NHC (with an IMU-to-vehicle misalignment
+    state) at 20 Hz, on the compiled path and on the Python path (a filterpy epoch each), give
+    the same trajectory, innovations and misalignment estimate."""
+    truth, imu, gnss, init, t, still = car
+    py = run_filter(imu, init, _meas(gnss, t, still, False), _config())
+    hr = run_filter(imu, init, _meas(gnss, t, still, True), _config())
+    assert py.complete and hr.complete and hr.high_rate is not None
+    assert hr.high_rate["t"].size > 0.5 * t.size  # most segments ran sample by sample
+    for name in ("zupt", "zaru", "nhc"):
+        a = py.innovations[py.innovations.type == name]
+        b = hr.innovations[hr.innovations.type == name]
+        assert len(a) == len(b) > 100
+        np.testing.assert_allclose(a["time"].to_numpy(), b["time"].to_numpy(), atol=1e-9)
+        # the covariance propagation differs (second order over 10 ms vs first order per
+        # sample): innovations agree to a small fraction of their sigma
+        d = np.abs(a["innov_0"].to_numpy() - b["innov_0"].to_numpy()) / a["innov_std_0"].to_numpy()
+        print(f"{name}: largest innovation difference {d.max():.3f} sigma")
+        assert d.max() < 0.1
+    ea, eb = nav_errors(py.forward, truth), nav_errors(hr.forward, truth)
+    for c in ("east", "north", "up", "vel_e", "vel_n"):
+        scale = np.sqrt(np.mean(ea[c].to_numpy() ** 2))
+        assert np.sqrt(np.mean((ea[c] - eb[c]).to_numpy() ** 2)) < 0.05 * scale, c
+    np.testing.assert_allclose(hr.forward[["mis_x", "mis_y", "mis_z"]].iloc[-1],
+                               py.forward[["mis_x", "mis_y", "mis_z"]].iloc[-1], atol=2e-4)
+    hs, ps = nav_errors(hr.smoothed, truth), nav_errors(py.smoothed, truth)
+    for c in ("east", "north"):
+        assert np.sqrt(np.mean(hs[c] ** 2)) < 1.2 * np.sqrt(np.mean(ps[c] ** 2)) + 0.01
+
+
+def _rebuild(res):
+    """The per-sample node sequence of a run with high-rate segments (the general nodes and
+    every high-rate sample, with P(k|k-1), P(k|k) recomputed from the stored F, Qd and updates)
+    and the forward-table row of each high-rate sample."""
+    hrd, up = res.high_rate, res.updates
+    f_ptr, f_col, f_act, q_row, q_col = hrd["pattern"]
+    n = res.layout.n
+    Pf, Pp, Phi, fb, rows = [], [], [], [], []
+    P = None
+    for k in range(res.epoch_times.size):
+        for h in range(hrd["seg0"][k], hrd["seg1"][k]):
+            F = np.zeros((n, n))
+            for a, i in enumerate(f_act):
+                F[i, f_col[f_ptr[a]:f_ptr[a + 1]]] = hrd["F"][h, f_ptr[a]:f_ptr[a + 1]]
+            Q = np.zeros((n, n))
+            Q[q_row, q_col] = hrd["Q"][h]
+            Ph = np.eye(n) + F
+            P = Ph @ P @ Ph.T + Q
+            if hrd["Pp_index"][h] >= 0:
+                P = hrd["Pp"][hrd["Pp_index"][h]]
+            Pp.append(P)
+            r = slice(hrd["r0"][h], hrd["r1"][h])
+            H, K = up["H"][r], up["K"][r].T
+            P = (np.eye(n) - K @ H) @ P
+            P = 0.5 * (P + P.T)
+            Pf.append(P)
+            Phi.append(Ph)
+            fb.append(hrd["feedback"][h])
+            rows.append(hrd["row"][h])
+        P = res.P_filtered[k]
+        Pf.append(P)
+        Pp.append(res.P_predicted[k])
+        Phi.append(res.Phi[k])
+        fb.append(res.feedback[k])
+        rows.append(-1)
+    return np.array(Pf), np.array(Pp), np.array(Phi), np.array(fb), np.array(rows)
+
+
+def test_high_rate_smoother_equals_rts_over_every_sample(car):
+    """The engine's backward pass through high-rate segments (adjoint backwards, smoothed
+    errors rebuilt forwards without stored covariances) equals the RTS smoother run on every
+    IMU sample of them as a node."""
+    truth, imu, gnss, init, t, still = car
+    res = run_filter(imu, init, _meas(gnss, t, still, True), _config())
+    Pf, Pp, Phi, fb, rows = _rebuild(res)
+    # high-rate samples (an IMU row at a filter epoch shows the epoch's node instead)
+    sel = (rows >= 0) & ~np.isin(t[np.maximum(rows, 0)], res.epoch_times)
+    print(f"{sel.sum()} high-rate samples between {res.epoch_times.size} nodes")
+    # the rebuilt covariances reproduce the forward table's stds
+    np.testing.assert_allclose(np.sqrt(Pf[sel][:, 3, 3]),
+                               res.forward["vel_e_std"].to_numpy()[rows[sel]], rtol=1e-6)
+    xs_plus, _, _ = rts_error_state(Pf, Pp, Phi, fb)
+    fwd, smo = res.forward.to_numpy(), res.smoothed.to_numpy()
+    j = rows[sel]
+    dv = (fwd[j, 3:6] - xs_plus[sel, 3:6]) - smo[j, 3:6]
+    scale = np.abs(xs_plus[sel, 3:6]).max()
+    print(f"largest smoothed-velocity difference {np.abs(dv).max():.2e} m/s "
+          f"(corrections up to {scale:.2e} m/s)")
+    assert np.abs(dv).max() < 1e-6 * max(scale, 1e-3)
+    dpar = (fwd[j, 18:24] - xs_plus[sel, 9:15]) - smo[j, 18:24]
+    assert np.abs(dpar).max() < 1e-9
+
+
+def test_recovery_runaway_and_refusals_on_the_compiled_path(car):
+    truth, imu, gnss, init, t, still = car
+    ts = t[still][1:]
+    # an odometer that reports 0.2 m/s during the second stop (a slipping wheel encoder): at
+    # every still sample, rejected by the 99.9 % gate, then force-applied by the gate recovery
+    # after 2 s; the smoother then sees the inflated P(k|k-1)
+    second = ts > ts[0] + 30.0
+    speed = np.where(second, 0.2, 0.0)
+    odo = BodyVelocity(ts, speed, axes=(1,), std=0.005, name="odo", high_rate=True)
+    res = run_filter(imu, init, [GnssPosition(gnss), odo],
+                     _config(gate_recovery=2.0, gate_probability=0.999, nis_window=None))
+    inn = res.innovations[res.innovations.type == "odo"]
+    n_rej, n_rec = int((~inn.accepted).sum()), int(inn.recovered.sum())
+    print(f"odometer: {n_rej} rejected, {n_rec} recoveries")
+    assert res.complete and n_rej >= 3 and n_rec >= 1
+    assert inn.loc[inn.recovered, "time"].min() > ts[second][0] + 2.0
+    assert np.isfinite(res.smoothed[["lat", "lon", "vel_n"]].to_numpy()).all()
+    Pf, Pp, Phi, fb, rows = _rebuild(res)  # the smoother through the recoveries is still RTS
+    sel = (rows >= 0) & ~np.isin(t[np.maximum(rows, 0)], res.epoch_times)
+    xs_plus, _, _ = rts_error_state(Pf, Pp, Phi, fb)
+    j = rows[sel]
+    dv = (res.forward.to_numpy()[j, 3:6] - xs_plus[sel, 3:6]) - res.smoothed.to_numpy()[j, 3:6]
+    assert np.abs(dv).max() < 1e-6
+    # runaway NIS on the compiled path stops the run and keeps what was computed
+    flip = 0.5 * (-1.0) ** np.arange(ts.size)  # +-0.5 m/s from sample to sample, sigma 1 mm/s
+    liar = BodyVelocity(ts, flip, axes=(1,), std=0.001, name="odo", high_rate=True)
+    rb = run_filter(imu, init, [GnssPosition(gnss), liar],
+                    _config(gate_probability=None, nis_window=5.0, nis_min_count=10))
+    assert not rb.complete and "runaway NIS" in str(rb.error)
+    assert ts[0] < rb.forward.index[-1] < ts[0] + 10.0
+    # a subclass with its own (Python) evaluate cannot run compiled
+    gated = type("Gated", (Zupt,), {"evaluate": lambda self, i, nav: None})(ts, high_rate=True)
+    with pytest.raises(ConfigError, match="compiled"):
+        run_filter(imu, init, [gated], _config())

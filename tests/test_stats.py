@@ -1,0 +1,45 @@
+"""Chi-square quantile and CDF without scipy.stats, against scipy.stats (the reference)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from scipy import stats
+
+from insgnss.stats import chi2_cdf, chi2_ppf
+
+P = np.array([1e-8, 1e-4, 0.025, 0.5, 0.9, 0.975, 0.999, 0.9999, 1 - 1e-9])
+DOF = [1, 2, 3, 4, 6, 9, 15, 30, 100, 1000, 12000]
+
+
+@pytest.mark.parametrize("dof", DOF)
+def test_chi2_ppf_and_cdf_match_scipy_stats(dof):
+    x = chi2_ppf(P, dof)
+    np.testing.assert_allclose(x, stats.chi2.ppf(P, dof), rtol=1e-12)
+    np.testing.assert_allclose(chi2_cdf(x, dof), P, rtol=1e-10)
+
+
+def test_gates_of_the_filter_exact_where_wilson_hilferty_is_not():
+    # the engine's default gate, 99.99 % with 1 dof: 15.1367 (Wilson-Hilferty: 16.21, 7 % off)
+    assert chi2_ppf(0.9999, 1) == pytest.approx(15.136705226623606, rel=1e-14)
+    assert chi2_ppf(0.9999, 2) == pytest.approx(-2.0 * np.log(1e-4), rel=1e-14)
+    assert chi2_ppf(0.999, 3) == pytest.approx(16.266236196238129, rel=1e-13)
+    # broadcasting, edges and the domain
+    lo, hi = chi2_ppf([0.025, 0.975], 3 * 50)
+    assert lo == pytest.approx(stats.chi2.ppf(0.025, 150)) and hi > lo
+    assert chi2_ppf(1.0, 3) == np.inf and chi2_ppf(0.0, 3) == 0.0
+    assert np.isnan(chi2_ppf(1.5, 3)) and np.isnan(chi2_ppf(0.5, 0))
+    assert chi2_cdf(-1.0, 2) == 0.0 and np.isnan(chi2_cdf(1.0, -1))
+    np.testing.assert_allclose(chi2_ppf(0.5, np.array([1, 2, 5])), stats.chi2.ppf(0.5, [1, 2, 5]),
+                               rtol=1e-12)
+
+
+def test_no_scipy_stats_import():
+    """The filter's start-up does not pay for scipy.stats (about 1 s)."""
+    import subprocess
+    import sys
+
+    code = ("import sys, insgnss.stats, insgnss.filter, insgnss.filter.engine, insgnss.foot; "
+            "print('scipy.stats' in sys.modules)")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert out.stdout.strip() == "False"
