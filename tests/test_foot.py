@@ -15,8 +15,13 @@ from insgnss.detect import Stillness
 from insgnss.earth import geodetic_to_enu
 from insgnss.errors import AlignmentError, ConfigError
 from insgnss.filter import gating
-from insgnss.filter.highrate import _first_order_propagation, _innovation_cov, _kalman_update
-from insgnss.filter.models import StateLayout, error_dynamics
+from insgnss.filter.highrate import (
+    _first_order_propagation,
+    _innovation_cov,
+    _kalman_update,
+    _propagate_short15,
+)
+from insgnss.filter.models import StateLayout, accumulate_short_term_dynamics, error_dynamics
 from insgnss.foot import FootConfig, level, run_foot_ins
 from insgnss.imu import grade
 from insgnss.mechanization.inverse import inverse_mechanize
@@ -50,6 +55,14 @@ def test_first_order_covariance_propagation_matches_dense():
                              np.empty((15, 15)))
     Phi = np.eye(15) + F
     np.testing.assert_allclose(P2, Phi @ P @ Phi.T + Qd, rtol=0, atol=1e-12)
+    # the block form of the short-term (pedestrian) model
+    Fs = np.zeros((15, 15))
+    accumulate_short_term_dynamics(Fs, dt, C, rng.normal(size=3) * 1e-3,
+                                   rng.normal(size=3) * 0.05, -1, -1)
+    P3 = P.copy()
+    _propagate_short15(P3, Fs, Qd, np.empty((15, 15)))
+    Phi = np.eye(15) + Fs
+    np.testing.assert_allclose(P3, Phi @ P @ Phi.T + Qd, rtol=0, atol=1e-12)
 
 
 @pytest.mark.parametrize("blocks", [[(3, 1.0)], [(9, -1.0)], [(3, 1.0), (9, -1.0)]])
