@@ -1,4 +1,4 @@
-"""Benchmark of the error-state filter + RTS smoother (issue 4) and its full Monte Carlo check.
+"""Benchmark of the error-state filter + smoother (issue 4) and its full Monte Carlo check.
 
     python bench/bench_filter.py                 # 1 h, 200 Hz IMU + 1 Hz GNSS pos/vel
     python bench/bench_filter.py --hours 0.25    # shorter
@@ -143,7 +143,7 @@ def main(argv=None):
     n = len(imu)
     tm = res.timing
     print(f"insgnss filter benchmark: {a.hours:g} h, {a.rate:g} Hz IMU ({n:,} samples), 1 Hz GNSS "
-          f"position + velocity, forward filter + RTS smoother (data generation {t_data:.1f} s)")
+          f"position + velocity, forward filter + smoother (data generation {t_data:.1f} s)")
     if cold is not None:
         print(f"  cold first run (empty numba cache, compile included): {cold['wall']:.2f} s")
     print(f"  warm total wall time: {wall:.2f} s  (runs: {', '.join(f'{w:.2f}' for w in walls)}; "
