@@ -168,3 +168,32 @@ def test_recovery_runaway_and_refusals_on_the_compiled_path(car):
     gated = type("Gated", (Zupt,), {"evaluate": lambda self, i, nav: None})(ts, high_rate=True)
     with pytest.raises(ConfigError, match="compiled"):
         run_filter(imu, init, [gated], _config())
+
+
+def test_coupled_clock_nominal_follows_its_dynamics(car):
+    """The nominal of a coupled augmenting block follows its dynamics between updates on both
+    paths: a receiver clock's bias grows by drift x dt (and its error covariance with it)."""
+    from insgnss.filter import ExtraState, Measurement
+
+    truth, imu, gnss, init, t, still = car
+
+    class ClockOnly(Measurement):
+        name = "clock_only"
+
+        def extra_states(self):
+            return [ExtraState("clock", 2, (10.0, 0.1), labels=("clock_bias", "clock_drift"),
+                               initial_value=(1000.0, 2.5), dynamics=((0.0, 1.0), (0.0, 0.0)),
+                               noise=((0.1, 0.0), (0.0, 0.001)))]
+
+        def evaluate(self, i, nav):
+            return None
+
+    ts = t[still][1:]
+    for hr in (False, True):
+        res = run_filter(imu, init, [ClockOnly([5.0]), Zupt(ts, high_rate=hr)],
+                         _config(smoother=False))
+        f = res.forward
+        span = f.index[-1] - f.index[0]
+        assert f["clock_drift"].iloc[-1] == pytest.approx(2.5, abs=1e-12)
+        assert f["clock_bias"].iloc[-1] == pytest.approx(1000.0 + 2.5 * span, rel=1e-9)
+        assert f["clock_bias_std"].iloc[-1] > 0.1 * span  # the drift sigma integrates

@@ -282,6 +282,7 @@ def dense_segment(model, dynamics, t, dth, dv, pos, vel, C, pnom, i_sg, i_sa, gm
             any_decay = True
     has_fx = Fx.shape[0] == n
     has_qx = Qx.shape[0] == n
+    pnom_old = pnom.copy()
     # the 15-state short-term model has a fixed block structure (no scale factors, extra
     # states or Gauss-Markov decay)
     short15 = model == 0 and dynamics == 1 and n == 15 and not any_decay and not has_fx
@@ -316,10 +317,15 @@ def dense_segment(model, dynamics, t, dth, dv, pos, vel, C, pnom, i_sg, i_sa, gm
                 if decay[i] > 0.0:
                     pnom[i - 9] *= np.exp(-decay[i] * dt_s)
                     F[i, i] -= decay[i] * dt_s
-        if has_fx:
+        if has_fx:  # coupled augmenting states: F block and the nominal p += Fx p dt
+            for i in range(npar):
+                pnom_old[i] = pnom[i]
             for i in range(9, n):
+                v = 0.0
                 for c in range(9, n):
                     F[i, c] += Fx[i, c] * dt_s
+                    v += Fx[i, c] * pnom_old[c - 9]
+                pnom[i - 9] += v * dt_s
         for i in range(n):
             Qd[i, i] = qdiag[i] * dt_s
         for i in range(3):

@@ -18,7 +18,8 @@ Propagation over an interval (:meth:`StrapdownModel.propagate`):
 
 Feedback: ``lat, lon, h`` from the ENU position error, ``v <- v - dv``, ``C <- exp(-[phi x]) C``
 and the parameters ``p <- p - dp`` (:func:`.kernels.apply_feedback`). A Gauss-Markov parameter's
-nominal follows its mean between epochs (``b' = -b / tau``).
+nominal follows its mean between epochs (``b' = -b / tau``), a coupled augmenting block its
+dynamics (``p' = F_x p``: a receiver clock's bias grows by ``drift dt``).
 
 The compiled high-rate path (:mod:`.highrate`) advances the same nominal arrays sample by sample
 (:meth:`StrapdownModel.high_rate_args`).
@@ -143,6 +144,10 @@ class StrapdownModel(ProcessModelBase):
         self.pnom = pm.initial_values.copy()
         self.par_decay = pm.decay[9:].copy()
         self.has_decay = bool(np.any(self.par_decay > 0))
+        # coupled augmenting states: their nominal follows p' = (Fx - diag(decay)) p
+        self.par_dyn = None
+        if pm.Fx is not None:
+            self.par_dyn = pm.Fx[9:, 9:] - np.diag(self.par_decay)
         self.j, self.frac = 1, 0.0
         self.rates = np.zeros((4, 3))
         self.seg_dur = 0.0
@@ -189,7 +194,10 @@ class StrapdownModel(ProcessModelBase):
             self.Qint, self.sub_dt, pm.gyro_psd, pm.accel_psd, self.table, self.seg, node,
             self.rates, pm.dyn_noise, self.dynamics)
         dur = t_end - self.t_last
-        if self.has_decay:
+        if self.par_dyn is not None:
+            # coupled blocks (a receiver clock: bias += drift dt) and decays, exactly
+            self.pnom[:] = kernels.expm_nb(self.par_dyn * dur) @ self.pnom
+        elif self.has_decay:
             # the nominal of a Gauss-Markov parameter follows its mean, b' = -b / tau
             self.pnom *= np.exp(-self.par_decay * dur)
         self.seg_dur = dur
