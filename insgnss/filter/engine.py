@@ -69,6 +69,9 @@ BIAS_COLS = ["gyro_bias_x", "gyro_bias_y", "gyro_bias_z",
              "accel_bias_x", "accel_bias_y", "accel_bias_z"]
 
 
+_KF: tuple = ()
+
+
 def _filterpy():
     """filterpy's ``predict`` and ``update``, imported on first use.
 
@@ -77,9 +80,12 @@ def _filterpy():
     log-likelihood); loading that file alone therefore saves nothing, so the import is deferred
     to the first filter run instead.
     """
-    from filterpy.kalman import predict, update
+    global _KF
+    if not _KF:
+        from filterpy.kalman import predict, update
 
-    return predict, update
+        _KF = (predict, update)
+    return _KF
 
 
 @dataclass
@@ -446,8 +452,9 @@ def _update(run: _Run, e: int, x, P):
         check_covariance(x, P, sched.epochs[e], "update")
     # the smoother's record of the update: H, K = Pp H^T S^-1, S^-1 H, S^-1 z
     S = H @ Pp @ H.T + R
-    G = np.linalg.solve(S, H)
-    run.store.add_update(H, Pp @ G.T, G, np.linalg.solve(S, z))
+    Gs = np.linalg.solve(S, np.column_stack([H, z]))
+    G = Gs[:, :-1]
+    run.store.add_update(H, Pp @ G.T, G, Gs[:, -1])
     return x, P, Pp
 
 
