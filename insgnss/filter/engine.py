@@ -477,7 +477,7 @@ def run_engine(model: ProcessModelBase, measurements: list[Measurement], config:
     t_start = _time.perf_counter()
     run = _Run(model, list(measurements), config)
     sched, store = run.sched, run.store
-    model.prepare(sched.epochs)
+    model.prepare(sched.epochs, sched.dense)
     n = model.layout.n
     x = np.zeros(n)
     P = model.initial_covariance()
@@ -538,8 +538,8 @@ def _finish(run: _Run, completed: int, error, t_start: float) -> FilterResult:
         smoothed = model.output(store, n_ok, n_rows, xs)
         timing["smoother"] = perf() - c0
     log = run.log.columns()
+    innovations, rejected = innovation_tables(run.log, log)
     log["names"] = list(run.log.names)
-    innovations, rejected = innovation_tables(run.log)
     timing["total"] = perf() - t_start
     updates = {"r0": store.r0[:n_ok], "r1": store.r1[:n_ok], "H": store.H[:store.n_rows],
                "K": store.K[:store.n_rows], "G": store.G[:store.n_rows],

@@ -75,8 +75,9 @@ class ProcessModelBase:
     def initial_covariance(self) -> np.ndarray:
         raise NotImplementedError
 
-    def prepare(self, epochs: np.ndarray) -> None:
-        """Allocate what the propagation and the output need for the epoch times."""
+    def prepare(self, epochs: np.ndarray, dense=None) -> None:
+        """Allocate what the propagation and the output need for the epoch times (``dense``:
+        the segments run by the compiled high-rate path)."""
         raise NotImplementedError
 
     def propagate(self, t_end: float, node: int):

@@ -721,7 +721,7 @@ class RissModel(ProcessModelBase):
         self.Q_y = np.empty((ny, ny))
         self.cols = np.empty((5, 3))
 
-    def prepare(self, epochs: np.ndarray) -> None:
+    def prepare(self, epochs: np.ndarray, dense=None) -> None:
         n_rows = self.t.size
         self.out_st = np.empty((n_rows, 9))
         self.out_aux = np.zeros((n_rows, 9))

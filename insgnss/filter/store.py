@@ -181,18 +181,26 @@ class InnovationLog:
             out = {k: np.empty(0) for k in keys}
             out["innov"] = out["innov_std"] = np.empty((0, 0))
             return out
+        if len(self._chunks) == 1:
+            return dict(self._chunks[0])
         out = {k: np.concatenate([c[k] for c in self._chunks]) for k in keys}
         m = max(c["innov"].shape[1] for c in self._chunks)
         for k in ("innov", "innov_std"):
-            out[k] = np.concatenate([np.pad(c[k], ((0, 0), (0, m - c[k].shape[1])),
-                                            constant_values=np.nan) for c in self._chunks])
+            parts = []
+            for c in self._chunks:
+                a = c[k]
+                if a.shape[1] < m:
+                    a = np.hstack([a, np.full((a.shape[0], m - a.shape[1]), np.nan)])
+                parts.append(a)
+            out[k] = np.concatenate(parts)
         return out
 
 
-def innovation_tables(log: InnovationLog) -> tuple[pd.DataFrame, pd.DataFrame]:
+def innovation_tables(log: InnovationLog, c: dict | None = None
+                      ) -> tuple[pd.DataFrame, pd.DataFrame]:
     """Innovation table (``time type dof nis threshold accepted recovered innov_k
-    innov_std_k``) and its rejected rows."""
-    c = log.columns()
+    innov_std_k``) and its rejected rows (``c``: :meth:`InnovationLog.columns`, if at hand)."""
+    c = log.columns() if c is None else c
     m = c["innov"].shape[1]
     names = np.array(log.names + [""], dtype=object)
     cols = {"time": c["time"], "type": names[c["tid"].astype(np.int64)] if c["tid"].size
@@ -204,5 +212,7 @@ def innovation_tables(log: InnovationLog) -> tuple[pd.DataFrame, pd.DataFrame]:
     for k in range(m):
         cols[f"innov_std_{k}"] = c["innov_std"][:, k]
     innovations = pd.DataFrame(cols)
-    rejected = innovations[~innovations["accepted"]].reset_index(drop=True)
+    acc = cols["accepted"]
+    rejected = (innovations.iloc[np.flatnonzero(~acc)].reset_index(drop=True) if not acc.all()
+                else innovations.iloc[:0])
     return innovations, rejected

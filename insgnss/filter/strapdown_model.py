@@ -159,14 +159,19 @@ class StrapdownModel(ProcessModelBase):
         self._nav_time = None
 
     # --- engine calls -------------------------------------------------------------------------
-    def prepare(self, epochs: np.ndarray) -> None:
-        """Allocate the output table and the propagation buffers for the epoch schedule."""
+    def prepare(self, epochs: np.ndarray, dense=None) -> None:
+        """Allocate the output table and the propagation buffers for the epoch schedule
+        (``dense``: segments the compiled high-rate path runs, which leave at most one IMU
+        interval to :meth:`propagate`)."""
         t = self.t
         n = self.layout.n
         self.table = np.empty((t.size, len(output_columns(self.layout))))
         self.seg = np.zeros(t.size, np.int64)
         self.post = np.zeros(t.size, np.bool_)
-        max_gap = float(np.max(np.diff(epochs))) if epochs.size > 1 else 0.0
+        gaps = np.diff(epochs)
+        if dense is not None and gaps.size:
+            gaps = np.where(np.asarray(dense)[1:], 2.0 * float(np.max(np.diff(t))), gaps)
+        max_gap = float(np.max(gaps)) if gaps.size else 0.0
         max_sub = min(int(np.ceil(max_gap / self.sub_T)),
                       int(np.ceil(max_gap / np.min(np.diff(t))))) + 3
         self.Fint = np.zeros((max_sub, n, n))
