@@ -76,15 +76,17 @@ def _model_feedback(model, pos, vel, C, pnom, x, work):
 
 
 @njit(cache=True)
-def _first_order_propagation(P, F, Qd, f_ptr, f_col, f_act, q_row, q_col, A, B):
+def _first_order_propagation(P, F, Qd, f_ptr, f_col, f_act, q_row, q_col, A, B, n=-1):
     """``P <- (I + F) P (I + F)^T + Qd`` (``F`` = F dt) in O(nnz(F) n).
 
     ``F`` is read at its structural non-zeros: the rows ``f_act[a]`` with the columns
     ``f_col[f_ptr[a]:f_ptr[a+1]]`` (:meth:`.strapdown_model.StrapdownModel.f_pattern`);
     ``Qd`` at the entries ``(q_row, q_col)``. With ``A = F[act] P``: ``B = P (I + F)^T = P +
-    A^T`` (active columns), then ``P' = B + F B`` (active rows). ``A``, ``B``: scratch.
+    A^T`` (active columns), then ``P' = B + F B`` (active rows). ``A``, ``B``: scratch; ``n``:
+    the state dimension (default from ``P``).
     """
-    n = P.shape[0]
+    if n < 0:
+        n = P.shape[0]
     na = f_act.shape[0]
     for a in range(na):  # A = F[act] P
         i = f_act[a]
@@ -156,7 +158,7 @@ def _propagate_short15(P, F, Qd, A):
 
 
 @njit(cache=True)
-def _kalman_update(P, H, z, m, HP, S, x, Kt, G, s, L, W, V, want_G):
+def _kalman_update(P, H, z, m, HP, S, x, Kt, G, s, L, W, V, want_G, n=-1):
     """Stacked Kalman update with the first ``m`` rows of ``H``, ``z`` and their
     ``HP = H P``, ``S = H P H^T + R`` (:func:`_innovation_cov`).
 
@@ -166,14 +168,15 @@ def _kalman_update(P, H, z, m, HP, S, x, Kt, G, s, L, W, V, want_G):
     symmetric rank-m downdate: the optimal-gain form of the Joseph update at a fraction of its
     cost). Returns False (P unchanged) if ``S`` is not positive definite.
     """
-    n = P.shape[0]
+    if n < 0:
+        n = P.shape[0]
     if not cholesky_into(S, L, m):  # S = L L^T
         return False
-    tri_solve(L, HP, m, W, False)
-    tri_solve(L, W, m, Kt, True)
+    tri_solve(L, HP, m, W, False, n)
+    tri_solve(L, W, m, Kt, True, n)
     if want_G:
-        tri_solve(L, H, m, V, False)
-        tri_solve(L, V, m, G, True)
+        tri_solve(L, H, m, V, False, n)
+        tri_solve(L, V, m, G, True, n)
     for i in range(m):  # s = S^-1 z
         v = z[i]
         for q in range(i):
@@ -339,7 +342,7 @@ def dense_segment(model, dynamics, t, dth, dv, pos, vel, C, pnom, i_sg, i_sa, gm
         if short15:
             _propagate_short15(P, F, Qd, A)
         else:
-            _first_order_propagation(P, F, Qd, f_ptr, f_col, f_act, q_row, q_col, A, B)
+            _first_order_propagation(P, F, Qd, f_ptr, f_col, f_act, q_row, q_col, A, B, n)
         frac = 0.0
         if check:  # cheap every sample: finite, positive variances
             fin = pos[0] + pos[1] + pos[2] + vel[0] + vel[1] + vel[2]
@@ -378,7 +381,10 @@ def dense_segment(model, dynamics, t, dth, dv, pos, vel, C, pnom, i_sg, i_sa, gm
             m_tot += d
             off[nm] = m_tot
         if nm:
-            _innovation_cov(Hk, P, Rk, m_tot, HP, S)
+            if n == 15:
+                _innovation_cov(Hk, P, Rk, m_tot, HP, S, 15)
+            else:
+                _innovation_cov(Hk, P, Rk, m_tot, HP, S, n)
         m_acc = 0
         recovered = False
         for k in range(nm):
@@ -399,7 +405,7 @@ def dense_segment(model, dynamics, t, dth, dv, pos, vel, C, pnom, i_sg, i_sa, gm
             gc = gating.gate_step(streak, tid, t[j], nis, thr, recovery)
             if gc == gating.RECOVER:
                 gating.inflate_for(P, Hk[o0:o1], Rk[o0:o1, o0:o1], zd, thr, n_nav)
-                _innovation_cov(Hk, P, Rk, m_tot, HP, S)  # the others see the inflated P
+                _innovation_cov(Hk, P, Rk, m_tot, HP, S, n)  # the others see the inflated P
                 nis = gating.nis_into(S[o0:o1, o0:o1], zd, Ln, wn)
                 recovered = True
             acc[k] = gc != gating.REJECT
@@ -443,7 +449,11 @@ def dense_segment(model, dynamics, t, dth, dv, pos, vel, C, pnom, i_sg, i_sa, gm
         # --- 3. stacked update and feedback
         hr_r0[h] = r
         if m_acc > 0:
-            if not _kalman_update(P, Hk, zk, m_acc, HP, S, x, Kt, G, sv, L, W, V, store_G):
+            if n == 15:  # the constant dimension lets LLVM unroll the inlined loops
+                ok = _kalman_update(P, Hk, zk, m_acc, HP, S, x, Kt, G, sv, L, W, V, store_G, 15)
+            else:
+                ok = _kalman_update(P, Hk, zk, m_acc, HP, S, x, Kt, G, sv, L, W, V, store_G, n)
+            if not ok:
                 code = NOT_PD
                 fail_t = t[j]
                 break

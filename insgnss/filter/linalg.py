@@ -1,7 +1,11 @@
 """Small dense linear algebra of the compiled filter code (numba): explicit loops, fast for
 n <= 30 and quick to compile (slice assignments such as ``A[:, :] = B`` are avoided on purpose:
 each costs seconds of compilation). One implementation each, shared by the strapdown kernels,
-the high-rate path, gating, health checks and the smoother."""
+the high-rate path, gating, health checks and the smoother.
+
+Functions with an optional dimension argument take it from a caller that compiled it as a
+constant (``numba.literally``, the high-rate path and the smoother): loops with constant bounds
+are unrolled and vectorised by LLVM, 2-3 times faster than with bounds read from the arrays."""
 
 from __future__ import annotations
 
@@ -96,10 +100,12 @@ def _mmspt(X, ri, ci, vals, nnz, out):
 
 
 @njit(cache=True)
-def tri_solve(L, B, m, out, transpose):
+def tri_solve(L, B, m, out, transpose, p=-1):
     """``out[:m] = L^-1 B[:m]`` (``transpose``: ``L^-T B[:m]``) for lower-triangular ``L``
-    (m x m), by row operations (``out`` may be ``B``)."""
-    p = B.shape[1]
+    (m x m), by row operations (``out`` may be ``B``); ``p``: the columns (default all; a
+    compile-time constant from the caller lets LLVM unroll the rows)."""
+    if p < 0:
+        p = B.shape[1]
     for ii in range(m):
         i = m - 1 - ii if transpose else ii
         for c in range(p):
@@ -126,10 +132,19 @@ def matvec_t(A, x, out):
 
 
 @njit(cache=True)
-def _innovation_cov(H, P, R, m, HP, S):
-    """``HP = H P`` and ``S = H P H^T + R`` for the first ``m`` rows."""
-    n = P.shape[0]
-    _mm(H[:m], P, HP[:m])
+def _innovation_cov(H, P, R, m, HP, S, n=-1):
+    """``HP = H P`` and ``S = H P H^T + R`` for the first ``m`` rows (``n``: the state
+    dimension, default from ``P``)."""
+    if n < 0:
+        n = P.shape[0]
+    for a in range(m):
+        for j in range(n):
+            HP[a, j] = 0.0
+        for q in range(n):
+            h = H[a, q]
+            if h != 0.0:
+                for j in range(n):
+                    HP[a, j] += h * P[q, j]
     for a in range(m):
         for b in range(a + 1):
             v = R[a, b]

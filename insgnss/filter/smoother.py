@@ -62,10 +62,11 @@ __all__ = ["mbf_backward", "rts_error_state", "smooth"]
 
 
 @njit(cache=True)
-def _through_update(lam, lt, Lam, Lt, H, K, G, s, r0, r1, covariance, KL, W):
+def _through_update(lam, lt, Lam, Lt, H, K, G, s, r0, r1, covariance, KL, W, n=-1):
     """``lambda~ = lambda^ - H^T (S^-1 z + K^T lambda^)`` and (``covariance``)
     ``Lambda~ = H^T S^-1 H + (I - K H)^T Lambda^ (I - K H)`` for the update rows r0 .. r1-1."""
-    n = lam.shape[0]
+    if n < 0:
+        n = lam.shape[0]
     m = r1 - r0
     for i in range(n):
         lt[i] = lam[i]
@@ -109,10 +110,11 @@ def _through_update(lam, lt, Lam, Lt, H, K, G, s, r0, r1, covariance, KL, W):
 
 
 @njit(cache=True)
-def _back_through_sparse(lam, lt, Lam, Lt, Fv, f_ptr, f_col, f_act, covariance, C1):
+def _back_through_sparse(lam, lt, Lam, Lt, Fv, f_ptr, f_col, f_act, covariance, C1, n=-1):
     """``lambda^ = Phi^T lambda~``, ``Lambda^ = Phi^T Lambda~ Phi`` for ``Phi = I + F`` with F
     given at its pattern (values ``Fv``)."""
-    n = lam.shape[0]
+    if n < 0:
+        n = lam.shape[0]
     for i in range(n):
         lam[i] = lt[i]
     for a in range(f_act.shape[0]):
@@ -148,6 +150,46 @@ def _back_through_dense(lam, lt, Lam, Lt, F, covariance, T1):
     if not covariance:
         return
     congruence_t(F, Lt, T1, Lam)  # Phi^T Lt Phi
+
+
+@njit(cache=True)
+def _hr_backward(h0, h1, lam, lt, Lam, Lt, H, K, G, s, hr_r0, hr_r1, hr_F, f_ptr, f_col, f_act,
+                 covariance, KL, W, T1, LT, n):
+    """The adjoint back through the high-rate samples ``h1-1 .. h0``; ``LT[h - h0]`` keeps
+    each ``lambda~``."""
+    for h in range(h1 - 1, h0 - 1, -1):
+        _through_update(lam, lt, Lam, Lt, H, K, G, s, hr_r0[h], hr_r1[h], covariance, KL, W, n)
+        for i in range(n):
+            LT[h - h0, i] = lt[i]
+        _back_through_sparse(lam, lt, Lam, Lt, hr_F[h], f_ptr, f_col, f_act, covariance, T1, n)
+
+
+@njit(cache=True)
+def _hr_forward(x, h0, h1, hr_F, hr_Q, hr_fb, hr_ppi, hr_Pp, LT, f_ptr, f_col, f_act, q_row,
+                q_col, xs_hr, xm, n):
+    """The smoothed errors of the high-rate samples ``h0 .. h1-1`` rebuilt forwards from
+    ``x`` (the smoothed error after the node before them; overwritten)."""
+    for h in range(h0, h1):
+        Fv = hr_F[h]
+        for i in range(n):
+            xm[i] = x[i]
+        for a in range(f_act.shape[0]):
+            i = f_act[a]
+            for q in range(f_ptr[a], f_ptr[a + 1]):
+                xm[i] += Fv[q] * x[f_col[q]]
+        if hr_ppi[h] >= 0:
+            Pp = hr_Pp[hr_ppi[h]]
+            for i in range(n):
+                v = 0.0
+                for j in range(n):
+                    v += Pp[i, j] * LT[h - h0, j]
+                xm[i] = -v
+        else:
+            for q in range(q_row.shape[0]):
+                xm[q_row[q]] -= hr_Q[h, q] * LT[h - h0, q_col[q]]
+        for i in range(n):
+            x[i] = xm[i] - hr_fb[h, i]
+            xs_hr[h, i] = x[i]
 
 
 @njit(cache=True)
@@ -192,11 +234,8 @@ def mbf_backward(Pf, Phi, fb, r0, r1, H, K, G, s, n_nodes, seg0, seg1, n_hr, hr_
 
     # trailing high-rate samples after the last node (a stopped run): lambda^ = 0 at the end
     if n_hr > tail0:
-        for h in range(n_hr - 1, tail0 - 1, -1):
-            _through_update(lam, lt, Lam, Lt, H, K, G, s, hr_r0[h], hr_r1[h], covariance, KL, W)
-            for i in range(n):
-                LT[h - tail0, i] = lt[i]
-            _back_through_sparse(lam, lt, Lam, Lt, hr_F[h], f_ptr, f_col, f_act, covariance, T1)
+        _hr_backward(tail0, n_hr, lam, lt, Lam, Lt, H, K, G, s, hr_r0, hr_r1, hr_F, f_ptr,
+                     f_col, f_act, covariance, KL, W, T1, LT, n)
         pend0, pend1 = tail0, n_hr
     for k in range(n_nodes - 1, -1, -1):
         P = Pf[k]
@@ -214,39 +253,23 @@ def mbf_backward(Pf, Phi, fb, r0, r1, H, K, G, s, n_nodes, seg0, seg1, n_hr, hr_
         if pend1 > pend0:  # rebuild the smoothed errors of the segment after node k
             for i in range(n):
                 x[i] = xs_plus[k, i]
-            for h in range(pend0, pend1):
-                Fv = hr_F[h]
-                for i in range(n):
-                    xm[i] = x[i]
-                for a in range(f_act.shape[0]):
-                    i = f_act[a]
-                    for q in range(f_ptr[a], f_ptr[a + 1]):
-                        xm[i] += Fv[q] * x[f_col[q]]
-                if hr_ppi[h] >= 0:
-                    Pp = hr_Pp[hr_ppi[h]]
-                    for i in range(n):
-                        v = 0.0
-                        for j in range(n):
-                            v += Pp[i, j] * LT[h - pend0, j]
-                        xm[i] = -v
-                else:
-                    for q in range(q_row.shape[0]):
-                        xm[q_row[q]] -= hr_Q[h, q] * LT[h - pend0, q_col[q]]
-                for i in range(n):
-                    x[i] = xm[i] - hr_fb[h, i]
-                    xs_hr[h, i] = x[i]
+            if n == 15:  # a constant dimension lets LLVM unroll the per-sample loops
+                _hr_forward(x, pend0, pend1, hr_F, hr_Q, hr_fb, hr_ppi, hr_Pp, LT, f_ptr,
+                            f_col, f_act, q_row, q_col, xs_hr, xm, 15)
+            else:
+                _hr_forward(x, pend0, pend1, hr_F, hr_Q, hr_fb, hr_ppi, hr_Pp, LT, f_ptr,
+                            f_col, f_act, q_row, q_col, xs_hr, xm, n)
             pend0, pend1 = 0, 0
         _through_update(lam, lt, Lam, Lt, H, K, G, s, r0[k], r1[k], covariance, KL, W)
         if k > 0:
             _back_through_dense(lam, lt, Lam, Lt, Phi[k], covariance, T1)
             if seg1[k] > seg0[k]:  # the high-rate samples between node k-1 and k
-                for h in range(seg1[k] - 1, seg0[k] - 1, -1):
-                    _through_update(lam, lt, Lam, Lt, H, K, G, s, hr_r0[h], hr_r1[h],
-                                    covariance, KL, W)
-                    for i in range(n):
-                        LT[h - seg0[k], i] = lt[i]
-                    _back_through_sparse(lam, lt, Lam, Lt, hr_F[h], f_ptr, f_col, f_act,
-                                         covariance, T1)
+                if n == 15:
+                    _hr_backward(seg0[k], seg1[k], lam, lt, Lam, Lt, H, K, G, s, hr_r0, hr_r1,
+                                 hr_F, f_ptr, f_col, f_act, covariance, KL, W, T1, LT, 15)
+                else:
+                    _hr_backward(seg0[k], seg1[k], lam, lt, Lam, Lt, H, K, G, s, hr_r0, hr_r1,
+                                 hr_F, f_ptr, f_col, f_act, covariance, KL, W, T1, LT, n)
                 pend0, pend1 = seg0[k], seg1[k]
 
 
