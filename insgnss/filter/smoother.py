@@ -56,6 +56,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
+from ..columns import STD_COLS  # noqa: F401  (the filter tables' std columns, here as before)
 from .linalg import _mm, cholesky_into, congruence_t, matvec_t, tri_solve
 
 __all__ = ["mbf_backward", "rts_error_state", "smooth"]

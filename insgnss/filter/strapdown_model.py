@@ -33,6 +33,7 @@ import numpy as np
 import pandas as pd
 
 from .. import earth
+from ..columns import STD_COLS
 from ..errors import InvalidValueError
 from ..imu import coning_sculling, grade, increments
 from ..mechanization.strapdown import NAV_COLS, STEP_WORK_SHAPE, NavState, attitude_update_id
@@ -44,8 +45,6 @@ from .process import ProcessModelBase
 __all__ = ["StrapdownModel", "STD_COLS", "output_columns", "levelling_covariance",
            "DISCRETIZATIONS"]
 
-STD_COLS = ["east_std", "north_std", "up_std", "vel_e_std", "vel_n_std", "vel_u_std",
-            "roll_std", "pitch_std", "heading_std"]
 DISCRETIZATIONS = {"second_order": kernels.DISC_SECOND_ORDER, "vanloan": kernels.DISC_VANLOAN}
 
 #: compiled high-rate path: model id of this nominal representation (see :mod:`.highrate`)
