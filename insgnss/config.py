@@ -676,7 +676,8 @@ SCHEMA: dict[str, Any] = {
         "rate_hz": _spec((int, float, str), "auto", 'trajectory rate [Hz], "imu" (every '
                          'sample) or "auto" (10 Hz; every sample with the foot preset); the '
                          "samples around each GNSS and control-point epoch are always kept "
-                         "(insgnss.columns)", check=_via('a positive number [Hz], "imu" or "auto"', output_rate)),
+                         "(insgnss.columns)",
+                         check=_via('a positive number [Hz], "imu" or "auto"', output_rate)),
         "figures": _spec(list, [], "report figures also written as fig_<name>.<ext> beside "
                          "the report", choices=["png", "pdf", "svg"],
                          when=_on("outputs.report")),
