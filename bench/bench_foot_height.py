@@ -37,47 +37,25 @@ import argparse
 import json
 import sys
 import time
-import tomllib
 from pathlib import Path
 
 import numpy as np
 
 REPO = Path(__file__).resolve().parents[1]
-DATA = REPO.parent / "shared" / "data"
-sys.path.insert(0, str(REPO / "scenarios" / "pyshoe"))
-import convert  # noqa: E402  (PyShoe .mat reader)
+sys.path.insert(0, str(REPO / "bench"))
+from foot_data import (  # noqa: E402  (the shared foot datasets)
+    DATA,
+    SITES,
+    convert,
+    read_ucr,
+    read_xio,
+    rigid_fit_2d,
+    ucr_truth,
+)
+from run_pyshoe import load_config  # noqa: E402  (the [foot] table of a TOML job)
 
 from insgnss.foot import FootConfig, run_foot_ins  # noqa: E402
-from insgnss.io import read_imu_csv  # noqa: E402
 from insgnss.strides import path_length, stance_distance  # noqa: E402
-from insgnss.validate import GapPolicy  # noqa: E402
-
-XIO_COLS = {"time": "Time (s)", "gyro_x": "Gyroscope X (deg/s)", "gyro_y": "Gyroscope Y (deg/s)",
-            "gyro_z": "Gyroscope Z (deg/s)", "accel_x": "Accelerometer X (g)",
-            "accel_y": "Accelerometer Y (g)", "accel_z": "Accelerometer Z (g)"}
-UCR_COLS = {"time": "time_index", "gyro_x": "gyro_x", "gyro_y": "gyro_y", "gyro_z": "gyro_z",
-            "accel_x": "acc_x", "accel_y": "acc_y", "accel_z": "acc_z"}
-UCR_RATE = 60.0
-#: approximate sites (normal gravity only; heading is unobservable anyway)
-SITES = {"xio": (np.radians(51.45), np.radians(-2.59), 20.0),     # Bristol
-         "ucr": (np.radians(33.97), np.radians(-117.33), 300.0),  # Riverside
-         "pyshoe": convert.TORONTO}
-
-
-def load_config(path: str | Path | None) -> FootConfig:
-    if path is None:
-        return FootConfig()
-    with open(path, "rb") as fh:
-        return FootConfig.from_dict(tomllib.load(fh).get("foot", {}))
-
-
-def rigid_fit_2d(a: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Rotation R and translation c minimising ``|R a + c - b|`` (2-D Kabsch)."""
-    ma, mb = a.mean(0), b.mean(0)
-    U, _, Vt = np.linalg.svd((a - ma).T @ (b - mb))
-    d = np.sign(np.linalg.det(Vt.T @ U.T))
-    R = Vt.T @ np.diag([1.0, d]) @ U.T
-    return R, mb - R @ ma
 
 
 def stance_length(res) -> float:
@@ -95,9 +73,7 @@ def _common(res, sol) -> dict:
 def run_xio(cfg: FootConfig, forward: bool) -> list[dict]:
     out = []
     for name in ("short_walk", "long_walk"):
-        imu = read_imu_csv(DATA / "foot-xio-gait" / f"{name}.csv", columns=XIO_COLS,
-                           gyro_unit="deg/s", accel_unit="g",
-                           gap_policy=GapPolicy(max_bridge=1.0, long="bridge"))
+        imu = read_xio(name)
         res = run_foot_ins(imu, cfg, lat=SITES["xio"][0], lon=SITES["xio"][1],
                            height=SITES["xio"][2])
         sol = res.forward if forward else res.trajectory
@@ -109,17 +85,13 @@ def run_xio(cfg: FootConfig, forward: bool) -> list[dict]:
 
 
 def run_ucr(cfg: FootConfig, forward: bool) -> list[dict]:
-    import pandas as pd
-
-    gt = pd.read_csv(DATA / "foot-ucr-zupt" / "positionGt.csv")
     out = []
-    for side, fname in (("left", "imuMeasLeft.csv"), ("right", "imuMeasRight.csv")):
-        imu = read_imu_csv(DATA / "foot-ucr-zupt" / fname, columns=UCR_COLS,
-                           time_unit="sample", rate_hz=UCR_RATE)
+    for side in ("left", "right"):
+        imu = read_ucr(side)
         res = run_foot_ins(imu, cfg, lat=SITES["ucr"][0], lon=SITES["ucr"][1],
                            height=SITES["ucr"][2])
         sol = res.forward if forward else res.trajectory
-        truth = gt[[f"pos_{side}_x", f"pos_{side}_y", f"pos_{side}_z"]].to_numpy()
+        truth = ucr_truth(side)
         n = min(len(sol), len(truth))
         a = sol[["north", "east"]].to_numpy()[:n]  # the truth is the NED mirror of ENU
         b = truth[:n, :2]
@@ -312,22 +284,16 @@ def level_floor_engine(imu, cfg: FootConfig, site, std: float = 0.002,
 def run_level_floor(cfg: FootConfig) -> list[dict]:
     """End height and horizontal metric of the engine with ZUPT, without and with LevelFloor,
     on x-io, UCR and the PyShoe walking trials."""
-    import pandas as pd
-
     rows = []
     for name in ("short_walk", "long_walk"):
-        imu = read_imu_csv(DATA / "foot-xio-gait" / f"{name}.csv", columns=XIO_COLS,
-                           gyro_unit="deg/s", accel_unit="g",
-                           gap_policy=GapPolicy(max_bridge=1.0, long="bridge"))
+        imu = read_xio(name)
         for lf in (False, True):
             p = level_floor_engine(imu, cfg, SITES["xio"], level_floor=lf)
             rows.append({"track": f"xio {name.split('_')[0]}", "level_floor": lf,
                          "horizontal": float(np.hypot(*p[-1, :2])), "height_err": p[-1, 2]})
-    gt = pd.read_csv(DATA / "foot-ucr-zupt" / "positionGt.csv")
-    for side, fname in (("left", "imuMeasLeft.csv"), ("right", "imuMeasRight.csv")):
-        imu = read_imu_csv(DATA / "foot-ucr-zupt" / fname, columns=UCR_COLS,
-                           time_unit="sample", rate_hz=UCR_RATE)
-        truth = gt[[f"pos_{side}_x", f"pos_{side}_y", f"pos_{side}_z"]].to_numpy()
+    for side in ("left", "right"):
+        imu = read_ucr(side)
+        truth = ucr_truth(side)
         for lf in (False, True):
             p = level_floor_engine(imu, cfg, SITES["ucr"], level_floor=lf)
             n = min(len(p), len(truth))

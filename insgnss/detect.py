@@ -36,6 +36,38 @@ gravity.
           few strides. This follows the idea of gait-dependent thresholds (Wagstaff,
           Peretroukhin, Kelly 2017, "Improving foot-mounted inertial navigation through
           real-time motion classification") without a classifier.
+``valley``  SHOE statistic with a threshold relative to the local stance-valley level, the
+          window set by the gait's own period::
+
+              v_k = q-quantile of T over [k - h, k + h], standing runs left out
+              gamma_k = factor * v_k          (gamma_lo where the window holds only standing)
+              2h = valley_strides * P,   P = gait period (autocorrelation of log T)
+
+          The quantile (5 %) of a window spanning two gait cycles is the depth of the stance
+          valleys around sample k: unlike the window minimum it is not set by one deep sample
+          (a short pause), and the window scales with the cadence (a running stride is half a
+          walking one). Used alone with a fixed ``adapt_factor``, or as one family of candidate
+          thresholds of the per-recording selection below.
+
+Per-recording threshold selection (:func:`threshold_candidates`, :func:`select_threshold`)
+------------------------------------------------------------------------------------------
+The best SHOE threshold of a recording is not a constant of the sensor: a walking foot comes
+to rest at ``|w|`` of a few deg/s, a running one never drops below 30-60 deg/s, yet the foot's
+velocity at the best threshold is about the same, 1-4 cm/s (Vicon, 28 PyShoe trials). The
+threshold is therefore chosen from the recording itself, without truth, among a set of
+candidates (fixed thresholds ``10^g`` and valley-relative ones ``10^c v_k``), by the
+consistency of the ZUPT-aided INS they produce: for each candidate a forward ZUPT filter is
+run and the criterion is the RMS velocity innovation at the first ZUPT of each stance
+(:func:`stance_entry_rms`),
+
+    J = sqrt( 1/S sum_s |nu_s|^2 ),   nu_s = v_INS at the first still sample of stance s,
+
+the velocity the INS has accumulated over the preceding swing. A threshold that is too high
+starts stances while the foot still moves (``nu_s`` contains its true velocity) and turns
+mid-swing dips into stances (``nu_s`` of m/s); one that is too low misses stances (``nu_s``
+after two swings of drift). The smallest ``J`` wins; fewer than ``min_stances`` stances give
+``J = inf``. The filter is the caller's (:func:`insgnss.foot.run_foot_ins` passes its own
+forward pass), so this module stays free of navigation code.
 
 With pyshoe's noise levels (``sigma_a = 0.00098 m/s^2``, ``sigma_w = 8.7266e-5 rad/s``) the
 SHOE statistic is dominated by the rate term, ``T ~ |w|^2 / sigma_w^2``: ``T = 1e6`` is an RMS
@@ -69,7 +101,9 @@ from numba import njit
 from .errors import ConfigError
 from .imu import ACCEL_COLS, DTHETA_COLS, DV_COLS, GYRO_COLS, is_increment_table
 
-METHODS = ("shoe", "amv", "are", "mag", "adaptive")
+METHODS = ("shoe", "amv", "are", "mag", "adaptive", "valley")
+#: methods built on the SHOE statistic
+SHOE_METHODS = ("shoe", "adaptive", "valley")
 G_STANDARD = 9.80665
 
 
@@ -257,6 +291,98 @@ def gait_adaptive_threshold(stat, half, gamma_lo, factor, peak_ratio, gait_peak,
     return out
 
 
+@njit(cache=True)
+def _quantile_sorted(buf, m, q):
+    """Linear-interpolated ``q``-quantile of the first ``m`` (sorted) entries of ``buf``."""
+    pos = q * (m - 1)
+    i = int(np.floor(pos))
+    if i >= m - 1:
+        return buf[m - 1]
+    f = pos - i
+    return buf[i] + f * (buf[i + 1] - buf[i])
+
+
+@njit(cache=True)
+def running_quantile(x, half, q, step):
+    """``q``-quantile of the finite values of ``x`` over ``[k - half, k + half]``.
+
+    Evaluated exactly at every ``step``-th sample (and the last) and interpolated linearly in
+    between (the level it is used for varies over a stride, not a sample); NaN where the window
+    holds no finite value. Cost ``O(N / step * W log W)``.
+    """
+    n = x.shape[0]
+    out = np.empty(n)
+    buf = np.empty(2 * half + 1)
+    nodes = np.arange(0, n, max(step, 1))
+    if nodes[-1] != n - 1:
+        nodes = np.append(nodes, n - 1)
+    val = np.empty(nodes.size)
+    for j in range(nodes.size):
+        k = nodes[j]
+        m = 0
+        for i in range(max(0, k - half), min(n, k + half + 1)):
+            if np.isfinite(x[i]):
+                buf[m] = x[i]
+                m += 1
+        if m == 0:
+            val[j] = np.nan
+        else:
+            buf[:m] = np.sort(buf[:m])
+            val[j] = _quantile_sorted(buf, m, q)
+    for j in range(nodes.size - 1):
+        a, b = nodes[j], nodes[j + 1]
+        va, vb = val[j], val[j + 1]
+        for k in range(a, b):
+            if np.isnan(va) or np.isnan(vb):
+                out[k] = va if k - a < b - k else vb
+            else:
+                out[k] = va + (vb - va) * (k - a) / (b - a)
+    out[n - 1] = val[nodes.size - 1]
+    return out
+
+
+def gait_period(stat: np.ndarray, dt: float, shortest: float = 0.4, longest: float = 3.0,
+                min_correlation: float = 0.2) -> float:
+    """Gait-cycle (stride) period [s] of a recording from the autocorrelation of ``log T``.
+
+    The highest local maximum of the normalised autocorrelation at lags in ``[shortest,
+    longest]`` seconds (human strides: 0.6-0.8 s running, 1.0-1.6 s walking; the 28 PyShoe
+    trials show 0.31-0.83 at their period); NaN when none reaches ``min_correlation`` (no
+    gait: standing, motions without rhythm; white noise gives about ``1/sqrt(N)``).
+    """
+    x = np.log(np.maximum(np.asarray(stat, float), 1e-300))
+    n = x.size
+    a, b = int(round(shortest / dt)), min(int(round(longest / dt)), n - 2)
+    if n < 4 or b - a < 3:
+        return float("nan")
+    x = x - x.mean()
+    f = np.fft.rfft(x, 2 * n)
+    ac = np.fft.irfft(f * np.conj(f))[:n]
+    if not ac[0] > 0:
+        return float("nan")
+    seg = ac[a:b + 1] / ac[0]
+    pk = np.flatnonzero((seg[1:-1] > seg[:-2]) & (seg[1:-1] >= seg[2:])) + 1
+    pk = pk[seg[pk] >= min_correlation]
+    if pk.size == 0:
+        return float("nan")
+    return float((a + pk[np.argmax(seg[pk])]) * dt)
+
+
+def valley_level(stat: np.ndarray, dt: float, config: DetectorConfig) -> np.ndarray:
+    """Stance-valley level ``v_k`` of the ``valley`` method (module docstring): the
+    ``valley_quantile`` of the statistic over ``valley_strides`` gait periods (``adapt_window``
+    seconds when no gait period is found), standing runs (below ``threshold`` for at least
+    ``quiet_duration``) left out; ``inf`` where the window holds only standing."""
+    stat = np.require(stat, float, ["C", "W"])
+    period = gait_period(stat, dt)
+    length = config.valley_strides * period if np.isfinite(period) else config.adapt_window
+    half = sample_count(0.5 * length, dt)
+    quiet = quiet_runs(stat, float(config.threshold), sample_count(config.quiet_duration, dt))
+    logs = np.where(quiet, np.nan, np.log(np.maximum(stat, 1e-300)))
+    v = running_quantile(logs, half, float(config.valley_quantile), max(1, half // 8))
+    return np.where(np.isnan(v), np.inf, np.exp(v))
+
+
 # --- compiled decision logic -----------------------------------------------------------------
 @njit(cache=True)
 def hysteresis_decision(stat, threshold, ratio):
@@ -343,12 +469,12 @@ class DetectorConfig:
 
     Attributes
     ----------
-    method : {"shoe", "amv", "are", "mag", "adaptive"}
+    method : {"shoe", "amv", "are", "mag", "adaptive", "valley"}
     window : float
         Window length [s] (rounded to an odd-or-even sample count, at least 1).
     threshold : float
-        ``shoe``/``adaptive``: dimensionless GLRT threshold ``gamma`` (the floor ``gamma_lo`` for
-        adaptive);
+        ``shoe``/``adaptive``/``valley``: dimensionless GLRT threshold ``gamma`` (the floor
+        ``gamma_lo`` for adaptive and valley, and the level below which a run is standing);
         ``amv``: accel standard deviation [m/s^2]; ``are``: RMS angular rate [rad/s];
         ``mag``: RMS magnitude deviation [m/s^2].
     sigma_a, sigma_w : float
@@ -363,12 +489,18 @@ class DetectorConfig:
     margin : float
         Still segments are shortened by this at both ends [s] (after the other steps).
     adapt_window : float
-        ``adaptive``: length ``2h`` of the window of the valley and peak levels [s].
+        ``adaptive``: length ``2h`` of the window of the valley and peak levels [s];
+        ``valley``: the window length when the recording shows no gait period.
     adapt_factor, adapt_peak_ratio, adapt_gait_peak : float
-        ``adaptive``: ``factor``, ``peak_ratio`` and ``gait_peak`` of the module docstring.
+        ``adaptive``: ``factor``, ``peak_ratio`` and ``gait_peak`` of the module docstring;
+        ``valley``: ``adapt_factor`` is its ``factor``.
     quiet_duration : float
-        ``adaptive``: runs below ``threshold`` at least this long [s] are standing and are
-        left out of the valley level.
+        ``adaptive``/``valley``: runs below ``threshold`` at least this long [s] are standing
+        and are left out of the valley level.
+    valley_quantile : float
+        ``valley``: quantile of the statistic that is the valley level (0 < q < 1).
+    valley_strides : float
+        ``valley``: window length in gait periods (estimated from the recording).
     threshold_max : float
         Upper bound of the (adaptive) threshold.
     """
@@ -389,6 +521,8 @@ class DetectorConfig:
     adapt_gait_peak: float = 1.0e9
     quiet_duration: float = 0.5
     threshold_max: float = np.inf
+    valley_quantile: float = 0.05
+    valley_strides: float = 2.0
 
     def __post_init__(self):
         if self.method not in METHODS:
@@ -404,6 +538,12 @@ class DetectorConfig:
             raise ConfigError("minimum durations must be >= 0", column="min_stance")
         if self.margin < 0:
             raise ConfigError("margin must be >= 0", column="margin", found=self.margin)
+        if not 0.0 < self.valley_quantile < 1.0:
+            raise ConfigError("valley_quantile must lie in (0, 1)", column="valley_quantile",
+                              found=self.valley_quantile)
+        if not self.valley_strides > 0.0:
+            raise ConfigError("valley_strides must be positive", column="valley_strides",
+                              found=self.valley_strides)
 
     @classmethod
     def from_dict(cls, d: dict) -> DetectorConfig:
@@ -487,9 +627,9 @@ def statistic_arrays(t, gyro, acc, config: DetectorConfig) -> tuple[np.ndarray, 
     gyro = np.require(gyro, float, ["C", "W"])
     m = config.method
     g = config.gravity
-    if g is None and m in ("shoe", "adaptive", "mag"):
+    if g is None and m in SHOE_METHODS + ("mag",):
         g = estimate_gravity(gyro, acc, w)
-    if m in ("shoe", "adaptive"):
+    if m in SHOE_METHODS:
         stat = shoe_statistic(acc, gyro, w, config.sigma_a, config.sigma_w, g)
     elif m == "amv":
         stat = amv_statistic(acc, w)
@@ -503,6 +643,10 @@ def statistic_arrays(t, gyro, acc, config: DetectorConfig) -> tuple[np.ndarray, 
             float(config.adapt_factor), float(config.adapt_peak_ratio),
             float(config.adapt_gait_peak), sample_count(config.quiet_duration, dt),
             float(config.threshold_max))
+    elif m == "valley":
+        v = valley_level(stat, dt, config)
+        thr = np.where(np.isfinite(v), config.adapt_factor * v, float(config.threshold))
+        thr = np.minimum(thr, float(config.threshold_max))
     else:
         thr = np.full(stat.size, min(float(config.threshold), float(config.threshold_max)))
     return stat, thr
@@ -526,6 +670,128 @@ def detect_arrays(t, gyro, acc, config: DetectorConfig) -> tuple[np.ndarray, np.
     t = np.asarray(t, float)
     stat, thr = statistic_arrays(t, gyro, acc, config)
     return decide(t, stat, thr, config), stat, thr
+
+
+# --- per-recording threshold selection ------------------------------------------------------
+#: candidate fixed SHOE thresholds ``10^g`` (log10 start, stop, step; pyshoe's sigmas put
+#: standing near 1e4-1e5, walking stance valleys near 1e5-1e6, running ones near 1e7-1e8)
+SELECTION_FIXED = (5.5, 9.5, 0.25)
+#: candidate valley factors ``10^c`` (log10 start, stop, step)
+SELECTION_RELATIVE = (0.25, 3.0, 0.25)
+
+
+def _log_grid(spec) -> np.ndarray:
+    lo, hi, step = (float(x) for x in spec)
+    if not (np.isfinite(lo) and np.isfinite(hi) and step > 0 and hi >= lo):
+        raise ConfigError("a candidate grid is (log10 start, stop, step) with stop >= start "
+                          "and step > 0", found=spec)
+    return np.arange(lo, hi + 1e-9 * max(1.0, abs(hi)), step)
+
+
+def threshold_candidates(t, stat, config: DetectorConfig, fixed=SELECTION_FIXED,
+                         relative=SELECTION_RELATIVE) -> list[tuple[str, float, np.ndarray]]:
+    """Candidate thresholds of the per-recording selection (module docstring).
+
+    Parameters
+    ----------
+    t, stat : array
+        Sample times [s] and the SHOE statistic of the recording.
+    config : DetectorConfig
+        Valley settings (``valley_quantile``, ``valley_strides``, ``adapt_window``,
+        ``threshold``, ``quiet_duration``).
+    fixed, relative : (start, stop, step) or None
+        log10 grids of the fixed thresholds and of the valley factors (None: family left out).
+
+    Returns
+    -------
+    list of (family, log10 value, threshold array)
+        ``("fixed", g, 10^g)`` and ``("valley", c, 10^c v_k)`` (``threshold`` where ``v_k`` is
+        undefined).
+    """
+    t = np.asarray(t, float)
+    dt = float(np.median(np.diff(t))) if t.size > 1 else 1.0
+    out = []
+    if fixed is not None:
+        out += [("fixed", float(g), np.full(t.size, 10.0**g)) for g in _log_grid(fixed)]
+    if relative is not None:
+        v = valley_level(stat, dt, config)
+        ok = np.isfinite(v)
+        out += [("valley", float(c), np.where(ok, 10.0**c * v, float(config.threshold)))
+                for c in _log_grid(relative)]
+    return out
+
+
+def stance_entry_rms(innovations: np.ndarray, still: np.ndarray, min_stances: int = 3) -> float:
+    """RMS norm of the ZUPT innovation at the first sample of each stance (module docstring).
+
+    Parameters
+    ----------
+    innovations : (N, 3) array
+        ZUPT velocity innovations per sample [m/s], NaN where no update was applied.
+    still : (N,) bool array
+        The stance samples the filter used.
+    min_stances : int
+        Fewer stances (after the first, which starts the record) give ``inf``.
+    """
+    nu = np.asarray(innovations, float)
+    s = np.asarray(still, bool)
+    starts = np.flatnonzero(np.diff(s.astype(np.int8)) == 1) + 1  # runs not starting at 0
+    starts = starts[np.isfinite(nu[starts, 0])] if starts.size else starts
+    if starts.size < max(1, int(min_stances)):
+        return float("inf")
+    return float(np.sqrt(np.mean(np.sum(nu[starts] ** 2, axis=1))))
+
+
+@dataclass
+class ThresholdSelection:
+    """Outcome of :func:`select_threshold`: the chosen candidate, its decisions and threshold,
+    and one row per candidate (``family``, ``log10``, ``criterion`` [m/s], ``stances``)."""
+
+    family: str
+    log10: float
+    criterion: float
+    still: np.ndarray
+    threshold: np.ndarray
+    table: pd.DataFrame
+
+
+def select_threshold(t, stat, config: DetectorConfig, forward, fixed=SELECTION_FIXED,
+                     relative=SELECTION_RELATIVE, min_stances: int = 3) -> ThresholdSelection:
+    """Choose the stance threshold of one recording by the stance-entry innovation criterion.
+
+    Parameters
+    ----------
+    t, stat : array
+        Sample times [s] and the SHOE statistic.
+    config : DetectorConfig
+        Decision post-processing (hysteresis, minimum stance, margin) and valley settings.
+    forward : callable
+        ``forward(still) -> (N, 3)`` ZUPT innovations of a forward ZUPT filter run on the
+        still mask ``still`` (NaN where none), supplied by the navigation layer.
+    fixed, relative, min_stances
+        See :func:`threshold_candidates` and :func:`stance_entry_rms`.
+
+    Returns
+    -------
+    ThresholdSelection
+        The candidate with the smallest criterion (the first of equals); when no candidate
+        yields ``min_stances`` stances the one with the most stances.
+    """
+    t = np.asarray(t, float)
+    rows = []
+    best = None
+    for family, value, thr in threshold_candidates(t, stat, config, fixed, relative):
+        still = decide(t, stat, thr, config)
+        n_st = int(np.count_nonzero(np.diff(np.concatenate([[0], still.astype(np.int8)])) == 1))
+        j = stance_entry_rms(forward(still), still, min_stances) if still.any() else np.inf
+        rows.append({"family": family, "log10": value, "criterion": j, "stances": n_st})
+        key = (j, -n_st)
+        if best is None or key < best[0]:
+            best = (key, family, value, j, still, thr)
+    if best is None:
+        raise ConfigError("no candidate thresholds", column="selection", found=(fixed, relative))
+    _, family, value, j, still, thr = best
+    return ThresholdSelection(family, value, j, still, thr, pd.DataFrame(rows))
 
 
 def detect_stillness(imu: pd.DataFrame, config: DetectorConfig | None = None, **kwargs) -> Stillness:

@@ -15,13 +15,17 @@ from insgnss.detect import (
     drop_short_runs,
     fill_short_runs,
     gait_adaptive_threshold,
+    gait_period,
     hysteresis_decision,
     mag_statistic,
     quiet_runs,
     running_max,
     running_min,
+    running_quantile,
     shoe_statistic,
     shrink_runs,
+    stance_entry_rms,
+    valley_level,
 )
 from insgnss.errors import ConfigError
 from insgnss.imu import increments_table, rates_table, trapezoid_increments
@@ -236,3 +240,84 @@ def test_config_validation():
     with pytest.raises(ConfigError):
         DetectorConfig(window=0.0)
     assert DetectorConfig.from_dict({"method": "are", "threshold": 0.2}).threshold == 0.2
+
+
+# --- valley level, gait period, per-recording threshold selection ---------------------------
+def test_running_quantile_matches_brute_force():
+    rng = np.random.default_rng(5)
+    x = rng.normal(size=400)
+    x[50:60] = np.nan  # excluded samples
+    x[300:400] = np.nan  # and a window that holds none at the end
+    half, q = 12, 0.05
+
+    def ref(k):
+        v = x[max(0, k - half):k + half + 1]
+        v = v[np.isfinite(v)]
+        return np.quantile(v, q) if v.size else np.nan
+
+    expect = np.array([ref(k) for k in range(x.size)])
+    got = running_quantile(x, half, q, 1)
+    np.testing.assert_allclose(got, expect, rtol=0, atol=1e-12)
+    assert np.isnan(got[-1]) and np.isnan(got[320])
+    # evaluated every 8th sample and interpolated: exact at the nodes, and between them within
+    # the Lipschitz bound of the input (slope 1/200 per sample: 8/200 * 0.5)
+    s = np.sin(np.arange(400) / 200.0)
+    sparse = running_quantile(s, half, q, 8)
+    dense = running_quantile(s, half, q, 1)
+    np.testing.assert_allclose(sparse[::8], dense[::8], atol=1e-12)
+    assert np.max(np.abs(sparse - dense)) <= 8 / 200 * 0.5 + 1e-12
+
+
+@pytest.mark.parametrize("period", [0.72, 1.1, 1.6])
+def test_gait_period_of_a_periodic_statistic(period):
+    dt = 0.005
+    t = np.arange(int(30 / dt)) * dt
+    rng = np.random.default_rng(1)
+    phase = (t % period) / period
+    stat = np.where(phase < 0.35, 1e5, 1e9) * np.exp(rng.normal(0, 0.5, t.size))
+    assert gait_period(stat, dt) == pytest.approx(period, abs=dt)
+    # white noise has no gait
+    assert np.isnan(gait_period(np.exp(rng.normal(0, 1, t.size)), dt))
+
+
+def _walk_then_run():
+    """SHOE-like statistic: 2 s standing (1e4), walking strides of 1.1 s (valleys 1e6, swings
+    1e10), running strides of 0.7 s (valleys 1e8, swings 10^10.5), at 200 Hz."""
+    walk = np.tile(np.r_[np.full(80, 1e6), np.full(140, 1e10)], 10)
+    run = np.tile(np.r_[np.full(30, 1e8), np.full(110, 10**10.5)], 14)
+    stat = np.r_[np.full(400, 1e4), walk, run]
+    return np.arange(stat.size) * 0.005, stat
+
+
+def test_valley_level_and_the_valley_method():
+    t, stat = _walk_then_run()
+    cfg = DetectorConfig(method="valley", threshold=1e5, adapt_factor=10.0, quiet_duration=0.5)
+    v = valley_level(stat, 0.005, cfg)
+    i_walk, i_run = 400 + 5 * 220 + 40, 400 + 2200 + 7 * 140 + 15
+    assert v[i_walk] == pytest.approx(1e6, rel=1e-9)  # the stance depth of the walk
+    assert v[i_run] == pytest.approx(1e8, rel=1e-9)  # ... and of the run, 2 decades higher
+    assert np.isinf(v[:100]).all()  # only standing in the window: no valley
+    thr = np.where(np.isfinite(v), cfg.adapt_factor * v, cfg.threshold)
+    st = hysteresis_decision(stat, thr, 1.0)
+    assert st[:400].all()
+    assert st[i_walk - 40:i_walk + 40].all() and not st[i_walk + 40:i_walk + 180].any()
+    assert st[i_run - 15:i_run + 15].all() and not st[i_run + 15:i_run + 125].any()
+    # the method end to end on an IMU table (its 0.6 s stances are not standing: quiet 1 s)
+    imu, truth = _synthetic_gait()
+    res = detect_stillness(imu, DetectorConfig(method="valley", window=0.025, threshold=1e3,
+                                               sigma_a=0.01, sigma_w=0.1 * D, gravity=G,
+                                               quiet_duration=1.0))
+    assert res.method == "valley" and np.mean(res.still.to_numpy() == truth) > 0.95
+
+
+def test_stance_entry_rms():
+    still = np.zeros(30, bool)
+    still[0:3] = still[8:12] = still[18:22] = still[26:30] = True
+    nu = np.full((30, 3), np.nan)
+    nu[still] = 0.001
+    nu[8] = [0.3, 0.0, 0.4]  # 0.5 m/s at the first stance after the start
+    nu[18] = [0.0, 0.1, 0.0]
+    nu[26] = [0.0, 0.0, -0.2]
+    assert stance_entry_rms(nu, still) == pytest.approx(np.sqrt((0.25 + 0.01 + 0.04) / 3))
+    assert stance_entry_rms(nu, still, min_stances=4) == np.inf
+    assert stance_entry_rms(np.full((30, 3), np.nan), still) == np.inf  # no updates applied
