@@ -22,13 +22,17 @@ forward solution's raw path length beside its stance-to-stance distance
 (:mod:`insgnss.simulate.gait`) with one effect at a time (intra-interval motion at 200/100/60
 Hz with and without the coning/sculling correction, ZUPT window timing, stance roll, clipping,
 scale factors, non-orthogonality, g-sensitivity, gravity, noise).
+``--only sensor``: the second round of issue 21 (docs/zupt.md section 6): anti-aliasing
+filters, accelerometer size effect, rate-dependent gyro scale and accelerometer nonlinearity,
+each applied on the simulated walk's 4 kHz grid, then compensated over a range of sizes on the
+real tracks (end height and the RMS ZUPT innovation at stance entry).
 ``--only level_floor``: ZUPT at the preset's stances in the general engine without and with
 :class:`insgnss.filter.height_aiding.LevelFloor` on the real tracks.
 
 Usage::
 
     PYTHONPATH=. python bench/bench_foot_height.py [--config job.toml] [--forward] [--json]
-                                                  [--only xio|ucr|pyshoe|sim|level_floor]
+                                                  [--only xio|ucr|pyshoe|sim|sensor|level_floor]
 """
 
 from __future__ import annotations
@@ -314,6 +318,149 @@ def run_level_floor(cfg: FootConfig) -> list[dict]:
     return rows
 
 
+# --- second round: sensor effects (anti-aliasing, size effect, nonlinearity) ---------------
+FINE = 20  # fine-grid samples per 200 Hz output interval (4 kHz)
+
+
+def _size_effect(w, wdot, a, axis: int, r) -> np.ndarray:
+    """Specific force of accelerometer ``axis`` at offset ``r`` [m] from the gyro point:
+    ``f_i + [w' x r + w x (w x r)]_i`` (body frame)."""
+    acc = np.cross(wdot, r) + np.cross(w, np.cross(w, r))
+    out = a.copy()
+    out[:, axis] += acc[:, axis]
+    return out
+
+
+def _lowpass(x, fc: float, fs: float) -> np.ndarray:
+    """2nd-order Butterworth low-pass (causal, as an IMU's anti-aliasing filter), started at
+    the first sample's value."""
+    from scipy.signal import butter, lfilter
+
+    b, a = butter(2, fc / (0.5 * fs))
+    return lfilter(b, a, x - x[0], axis=0) + x[0]
+
+
+def sensor_effects_sim(cfg: FootConfig) -> list[dict]:
+    """End height error of the 100.8 m level walk with one sensor effect applied on the 4 kHz
+    grid before point sampling at 200 Hz (truth stance windows)."""
+    from insgnss.earth import geodetic_to_enu
+    from insgnss.imu import ACCEL_COLS, GYRO_COLS, rates_table
+
+    rate = 200.0
+    fine = _sim(rate=rate * FINE, oversample=1, output="rates")
+    w = fine.imu[GYRO_COLS].to_numpy()
+    a = fine.imu[ACCEL_COLS].to_numpy()
+    t = np.asarray(fine.imu.index, float)
+    wdot = np.gradient(w, t, axis=0)
+    tr = fine.truth.iloc[::FINE]
+    still = tr.stationary.to_numpy() > 0.5
+    site = (tr.lat.iloc[0], tr.lon.iloc[0], tr.height.iloc[0])
+    e, n, u = geodetic_to_enu(tr.lat.values, tr.lon.values, tr.height.values, *site)
+    rows = []
+
+    def add(name, wf, af):
+        imu = rates_table(t[::FINE], wf[::FINE], af[::FINE])
+        sol = run_foot_ins(imu, cfg, still=still, lat=site[0], lon=site[1],
+                           height=site[2]).trajectory
+        rows.append({"effect": name, "dh": float(sol.up.iloc[-1] - u[-1]),
+                     "dxy": float(np.hypot(sol.east.iloc[-1] - e[-1], sol.north.iloc[-1] - n[-1]))})
+
+    fs = rate * FINE
+    add("point rate samples, no effect", w, a)
+    for fc in (100.0, 50.0, 20.0):
+        add(f"anti-aliasing {fc:.0f} Hz on gyro and accel", _lowpass(w, fc, fs), _lowpass(a, fc, fs))
+        add(f"  accel only {fc:.0f} Hz (gyro leads)", w, _lowpass(a, fc, fs))
+        add(f"  gyro only {fc:.0f} Hz (gyro lags)", _lowpass(w, fc, fs), a)
+    for mm in (1.0, 3.0):
+        r = mm * 1e-3
+        add(f"size effect: y accel {mm:.0f} mm up", w, _size_effect(w, wdot, a, 1, (0, 0, r)))
+        add(f"size effect: z accel {mm:.0f} mm forward", w, _size_effect(w, wdot, a, 2, (0, r, 0)))
+        add(f"size effect: z accel {mm:.0f} mm up", w, _size_effect(w, wdot, a, 2, (0, 0, r)))
+    nw = np.linalg.norm(w, axis=1, keepdims=True)
+    for k in (1e-4, 1e-3):
+        add(f"gyro scale k|w|, k = {k:g} s/rad ({8 * k:.2%} at 8 rad/s)", w * (1 + k * nw), a)
+    for k2 in (1e-4, 1e-3):
+        add(f"accel quadratic k2 f^2, {k2 * 9.80665e3:.0f} mg/g^2", w, a + k2 * a**2)
+    return rows
+
+
+def _sensor_tracks():
+    """The real tracks of the second round: x-io short/long, three PyShoe walks, UCR right."""
+    out = {}
+    for name in ("short_walk", "long_walk"):
+        out[f"xio {name.split('_')[0]}"] = (read_xio(name), SITES["xio"], 0.0)
+    for mat in sorted((DATA / "pyshoe-vicon").glob("2017-11-22-*.mat")):
+        if mat.stem[-8:] in ("11-22-03", "11-37-47", "11-50-42"):
+            imu, truth = convert.to_insgnss(mat)
+            tz = truth["z"].to_numpy()
+            out[f"pyshoe {mat.stem[-8:]}"] = (imu, SITES["pyshoe"], float(tz[-1] - tz[0]))
+    out["ucr right"] = (read_ucr("right"), SITES["ucr"], None)
+    return out
+
+
+def _compensated(cfg, track, ctx, effect, size, wc, ac) -> dict:
+    """One row of :func:`sensor_effects_real`: the preset on corrected rates."""
+    from insgnss.detect import stance_entry_rms
+    from insgnss.imu import rates_table
+
+    t, still, site, up_true = ctx
+    res = run_foot_ins(rates_table(t, wc, ac), cfg, still=still, lat=site[0], lon=site[1],
+                       height=site[2])
+    nu = res.innovations[["zupt_e", "zupt_n", "zupt_u"]].to_numpy()
+    return {"track": track, "effect": effect, "size": size,
+            "dh": float(res.trajectory.up.iloc[-1] - up_true),
+            "J_mm_s": 1e3 * stance_entry_rms(nu, still)}
+
+
+def sensor_effects_real(cfg: FootConfig) -> list[dict]:
+    """Each effect *compensated* on the real tracks over a range of sizes, with the preset's
+    stance windows: end height error and J, the RMS ZUPT innovation at stance entry."""
+    from insgnss.detect import detect_arrays, imu_rates
+
+    rows = []
+    for track, (imu, site, dz_true) in _sensor_tracks().items():
+        t, w, a = imu_rates(imu)
+        fs = 1.0 / float(np.median(np.diff(t)))
+        still, _, _ = detect_arrays(t, w, a, cfg.detector)
+        wdot = np.gradient(w, t, axis=0)
+        ctx = (t, still, site, 0.0 if dz_true is None else dz_true)
+        rows.append(_compensated(cfg, track, ctx, "none", 0.0, w, a))
+        for axis in range(3):
+            for d in range(3):
+                for mm in (-3.0, -1.0, 1.0, 3.0):
+                    r = np.zeros(3)
+                    r[d] = mm * 1e-3
+                    rows.append(_compensated(
+                        cfg, track, ctx, f"size effect: accel {'xyz'[axis]} along "
+                        f"{'xyz'[d]} [mm]", mm, w, _size_effect(w, wdot, a, axis, -r)))
+            for k2 in (-3e-4, -1e-4, 1e-4, 3e-4):
+                ac = a.copy()
+                ac[:, axis] -= k2 * a[:, axis] ** 2
+                rows.append(_compensated(cfg, track, ctx, f"accel {'xyz'[axis]} quadratic "
+                                         "[1/(m/s^2)]", k2, w, ac))
+        nw = np.linalg.norm(w, axis=1, keepdims=True)
+        for k in (-3e-3, -1e-3, 1e-3, 3e-3):
+            rows.append(_compensated(cfg, track, ctx, "gyro scale k|w| [s/rad]", k,
+                                     w / (1 + k * nw), a))
+        for frac in (0.4, 0.25, 0.15, 0.1):
+            fc = frac * fs
+            rows.append(_compensated(cfg, track, ctx, "accel low-passed [Hz]", fc, w,
+                                     _lowpass(a, fc, fs)))
+            rows.append(_compensated(cfg, track, ctx, "gyro low-passed [Hz]", fc,
+                                     _lowpass(w, fc, fs), a))
+    return rows
+
+
+def print_sensor(sim: list[dict], real: list[dict]) -> None:
+    print("simulated level walk, 200 Hz point samples, one sensor effect:")
+    for r in sim:
+        print(f"  {r['effect']:52s} dh {r['dh']:+8.3f} m  dxy {r['dxy']:7.3f} m")
+    print("real tracks, effect compensated (end height error [m], J [mm/s]):")
+    for r in real:
+        print(f"  {r['track']:16s} {r['effect']:42s} {r['size']:+10.4g}  dh {r['dh']:+7.3f}  "
+              f"J {r['J_mm_s']:6.1f}")
+
+
 def run_all(cfg: FootConfig, forward: bool = False) -> list[dict]:
     return run_xio(cfg, forward) + run_ucr(cfg, forward) + run_pyshoe(cfg, forward)
 
@@ -337,11 +484,18 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--config", type=Path, default=None, help="TOML with a [foot] table")
     p.add_argument("--forward", action="store_true", help="the causal filter, not smoothed")
     p.add_argument("--json", action="store_true")
-    p.add_argument("--only", choices=["xio", "ucr", "pyshoe", "sim", "level_floor"],
+    p.add_argument("--only", choices=["xio", "ucr", "pyshoe", "sim", "level_floor", "sensor"],
                    default=None)
     a = p.parse_args(argv)
     cfg = load_config(a.config)
     t0 = time.perf_counter()
+    if a.only == "sensor":
+        sim, real = sensor_effects_sim(cfg), sensor_effects_real(cfg)
+        if a.json:
+            print(json.dumps({"simulation": sim, "real": real}, indent=1))
+        else:
+            print_sensor(sim, real)
+        return 0
     if a.only == "sim":
         rows = sim_effects(cfg)
         print(json.dumps(rows, indent=1)) if a.json else print_sim(rows)
