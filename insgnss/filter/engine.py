@@ -88,6 +88,10 @@ def _filterpy():
     return _KF
 
 
+#: columns of ``FilterConfig.extra_noise`` (stds; missing ones are 0)
+EXTRA_NOISE_COLS = ("pos_std", "vel_std", "att_std", "up_std")
+
+
 @dataclass
 class FilterConfig:
     """Configuration of :func:`run_filter` (SI units, radians).
@@ -147,8 +151,11 @@ class FilterConfig:
     extra_noise : DataFrame or None
         Extra process noise at given times, e.g. for IMU gaps the mechanization bridged
         (:func:`insgnss.policies.gap_noise`): indexed by time [s] with columns ``pos_std``
-        [m], ``vel_std`` [m/s], ``att_std`` [rad] (the same on every axis); each row's variances
-        are added to ``Qd`` of the propagation segment that contains its time.
+        [m], ``vel_std`` [m/s], ``att_std`` [rad] (the same on every axis) and, optionally,
+        ``up_std`` [m] (the vertical position only; the foot profile's per-stride height
+        noise); missing columns are 0. Each row's variances are added to ``Qd`` of the
+        propagation segment that contains its time (segments end at epochs: a row meant for
+        one instant needs an epoch there).
     error_dynamics : {"full", "short_term"}
         The strapdown error model: the full LLF dynamics (:mod:`.models`) or the short-term
         pedestrian form without Earth-rate, transport-rate and gravity-gradient couplings
@@ -331,10 +338,11 @@ class _Run:
                                0 if pat is None else pat[1].size,
                                0 if pat is None else pat[3].size)
         if config.extra_noise is not None and len(config.extra_noise):
-            self.xn_t = np.asarray(config.extra_noise.index, float)
-            self.xn_var = config.extra_noise[["pos_std", "vel_std", "att_std"]].to_numpy(float) ** 2
+            xn = config.extra_noise.reindex(columns=list(EXTRA_NOISE_COLS)).fillna(0.0)
+            self.xn_t = np.asarray(xn.index, float)
+            self.xn_var = xn.to_numpy(float) ** 2
         else:
-            self.xn_t, self.xn_var = np.empty(0), np.empty((0, 3))
+            self.xn_t, self.xn_var = np.empty(0), np.empty((0, len(EXTRA_NOISE_COLS)))
         self.xn_i = int(np.searchsorted(self.xn_t, self.sched.epochs[0], side="right"))
         self.I = np.eye(n)
 
@@ -368,6 +376,8 @@ def _propagate(run: _Run, e: int, node: int, x, P):
             for blk, sl in enumerate(model.noise_blocks):  # position, velocity, attitude
                 i3 = np.arange(sl.start, sl.stop)
                 Qd[i3, i3] += run.xn_var[run.xn_i, blk]
+            up = model.noise_blocks[0].start + 2  # ENU position: the up component
+            Qd[up, up] += run.xn_var[run.xn_i, 3]
             run.xn_i += 1
     c0 = _time.perf_counter()
     kf_predict, _ = _filterpy()
