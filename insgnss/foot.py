@@ -32,6 +32,19 @@ on the still samples (every ``update_every``-th of a still run; ZARU only where 
 below ``zaru_max_rate``); ``sigma_zupt,k`` grows with the detector statistic (soft ZUPT).
 Closed loop: after each update the estimate is fed back into the nominal and reset to zero.
 
+Stance threshold: chosen per recording (``threshold_selection = "innovation"``, the default)
+among fixed and valley-relative SHOE thresholds by the RMS ZUPT innovation at stance entry of a
+forward pass with each (:func:`insgnss.detect.select_threshold`, docs/zupt.md section 1).
+
+Height aiding (optional, docs/zupt.md section 7): a level floor between consecutive stances
+(:class:`~insgnss.filter.height_aiding.LevelFloor`, ``level_floor``) and barometric height when
+the IMU table carries a ``pressure`` or ``baro_height`` column
+(:class:`~insgnss.filter.height_aiding.BaroHeight`). ZUPT keeps the modelled height variance at
+mm level while the real foot INS climbs 0.4-1.3 % of the distance walked, so at each stance
+release the vertical position variance grows by ``(stride_height_noise L)^2``, ``L`` the
+horizontal length of the stride that ended there: without it an aiding measurement barely moves
+the height (level floor) or is absorbed by its own offset state (barometer).
+
 Smoother: the engine's modified Bryson-Frazier backward pass (:mod:`insgnss.filter.smoother`)
 over the nodes of the compiled path (one per IMU sample) gives the smoothed trajectory at every
 sample.
@@ -50,7 +63,7 @@ everybody - an open-source embedded implementation", OpenShoe); Wagstaff et al. 
 
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass, field, fields
+from dataclasses import asdict, dataclass, field, fields, replace
 
 import numpy as np
 import pandas as pd
@@ -58,14 +71,27 @@ import pandas as pd
 from . import earth
 from .align import level
 from .attitude import euler_to_dcm
-from .detect import DetectorConfig, Stillness, detect_arrays, imu_rates
+from .detect import (
+    SELECTION_FIXED,
+    SELECTION_RELATIVE,
+    SHOE_METHODS,
+    DetectorConfig,
+    Stillness,
+    ThresholdSelection,
+    detect_arrays,
+    imu_rates,
+    select_threshold,
+    statistic_arrays,
+)
 from .errors import AlignmentError, ConfigError, FilterHealthError
 from .filter.engine import BIAS_COLS, FilterConfig, run_engine
-from .filter.measurements import Zaru, Zupt
+from .filter.height_aiding import BARO_COLUMNS, BaroHeight, LevelFloor
+from .filter.measurements import Measurement, Zaru, Zupt
 from .filter.strapdown_model import STD_COLS, StrapdownModel
 from .imu import ImuErrorModel, increments
 from .mechanization.strapdown import NAV_COLS, NavState
 from .stats import chi2_cdf
+from .strides import stance_positions, still_runs
 
 __all__ = ["FootConfig", "FootResult", "foot_detector", "foot_filter_arrays",
            "foot_filter_config", "initial_state", "level", "level_window_mask", "run_foot_ins"]
@@ -78,11 +104,19 @@ PYSHOE_SIGMA_W = 8.7266e-5
 
 
 def foot_detector() -> DetectorConfig:
-    """The foot preset's stance detector: gait-adaptive SHOE (see :mod:`insgnss.detect`)."""
-    return DetectorConfig(method="adaptive", window=0.04, threshold=1.0e6,
+    """The foot profile's stance detector: SHOE with pyshoe's sigmas over 0.04 s, a threshold
+    relative to the stance-valley level (``valley``: 5 % quantile over two gait periods,
+    standing below 1e6 = about 5 deg/s for 0.5 s left out; :mod:`insgnss.detect`). With
+    ``FootConfig.threshold_selection = "innovation"`` (the default) the threshold is chosen per
+    recording; ``adapt_factor`` is the valley factor used without the selection."""
+    return DetectorConfig(method="valley", window=0.04, threshold=1.0e6,
                           sigma_a=PYSHOE_SIGMA_A, sigma_w=PYSHOE_SIGMA_W, adapt_window=3.0,
-                          adapt_factor=10.0, adapt_peak_ratio=30.0, adapt_gait_peak=5.0e8,
-                          quiet_duration=0.5)
+                          adapt_factor=10.0, quiet_duration=0.5, valley_quantile=0.05,
+                          valley_strides=2.0)
+
+
+#: ``FootConfig.threshold_selection`` values
+THRESHOLD_SELECTIONS = ("innovation", "none")
 
 
 @dataclass
@@ -93,6 +127,13 @@ class FootConfig:
     ----------
     detector : DetectorConfig
         Stance detector (see :mod:`insgnss.detect`).
+    threshold_selection : {"innovation", "none"}
+        ``innovation``: the SHOE threshold of the recording is chosen among the candidates
+        ``selection_fixed`` and ``selection_relative`` by the RMS ZUPT innovation at stance
+        entry of a forward pass with each (:func:`insgnss.detect.select_threshold`; needs a
+        SHOE-based detector method); ``none``: the detector decides alone.
+    selection_fixed, selection_relative : (float, float, float)
+        log10 grids (start, stop, step) of the fixed thresholds and of the valley factors.
     zaru : bool
         Apply ZARU together with ZUPT on still samples.
     zaru_max_rate : float
@@ -112,8 +153,11 @@ class FootConfig:
         above it is skipped (``inf``: no gating). 16.27 is the 99.9 % point. The engine gates by
         probability: these become ``chi2.cdf(gate, 3)``; its gate recovery applies.
     accel_psd, gyro_psd : float
-        Velocity / angle random walk of the process model [m/s/sqrt(s)], [rad/sqrt(s)]
-        (larger than the datasheet values: they also cover the unmodelled dynamics of a foot).
+        Velocity / angle random walk of the process model [m/s/sqrt(s)], [rad/sqrt(s)]. The
+        velocity one is the sensor's white noise (VN-100: 0.14 mg/sqrt(Hz)); the foot's
+        unmodelled accelerometer errors are in ``accel_dyn_noise``. The angle one is an
+        effective value about 50 times the datasheet ARW: it carries the rotation-dependent
+        gyro errors of the swing (docs/zupt.md section 2).
     accel_dyn_noise, gyro_dyn_noise : float
         Dynamics-dependent process noise [fraction]: a white error of this fraction of each IMU
         interval's dynamic velocity increment ``|C dv - g dt|`` and angle increment
@@ -134,9 +178,31 @@ class FootConfig:
         Run the backward (smoother) pass and report the smoothed trajectory.
     gravity_model : str
         Normal-gravity model of the nominal mechanization.
+    level_floor : bool
+        Consecutive stances at the same height (:class:`~.filter.height_aiding.LevelFloor`)
+        for walks known to stay on one floor (off by default: stairs and ramps are skipped only
+        beyond ``level_floor_max_step``).
+    level_floor_std, level_floor_max_step : float
+        Floor flatness plus stance repeatability [m]; the height change between two stances
+        above which no constraint is applied [m].
+    baro : bool
+        Use a ``pressure`` [Pa] or ``baro_height`` [m] column of the IMU table when present
+        (:class:`~.filter.height_aiding.BaroHeight`).
+    baro_std, baro_interval, baro_offset_psd : float
+        Barometer height noise [m], one reading per this many seconds, random-walk PSD of its
+        offset [m^2/s].
+    stride_height_noise : float
+        At each stance release the vertical position variance grows by
+        ``(stride_height_noise * L)^2``, ``L`` the horizontal length of the stride that ended
+        there [fraction]: the real foot INS climbs 0.4-1.3 % of the distance walked, which the
+        ZUPT-only covariance does not show (docs/zupt.md section 7). Applied when a height
+        aiding is used.
     """
 
     detector: DetectorConfig = field(default_factory=foot_detector)
+    threshold_selection: str = "innovation"
+    selection_fixed: tuple = SELECTION_FIXED
+    selection_relative: tuple = SELECTION_RELATIVE
     zaru: bool = True
     zaru_max_rate: float = 0.05
     sigma_zupt: float = 0.01
@@ -146,9 +212,9 @@ class FootConfig:
     zupt_noise_ref: float = 1.0e5
     gate_zupt: float = np.inf
     gate_zaru: float = np.inf
-    accel_psd: float = 0.01
+    accel_psd: float = 1.4e-3
     gyro_psd: float = 3e-3
-    accel_dyn_noise: float = 0.01
+    accel_dyn_noise: float = 0.02
     gyro_dyn_noise: float = 0.0
     gyro_bias_rw: float = 1e-5
     accel_bias_rw: float = 1e-4
@@ -162,10 +228,56 @@ class FootConfig:
     heading: float = 0.0
     smooth: bool = True
     gravity_model: str = "somigliana"
+    level_floor: bool = False
+    level_floor_std: float = 0.002
+    level_floor_max_step: float = 0.05
+    baro: bool = True
+    baro_std: float = 0.2
+    baro_interval: float = 0.5
+    baro_offset_psd: float = 1.0e-5
+    stride_height_noise: float = 0.01
 
     def __post_init__(self):
         if isinstance(self.detector, dict):
             self.detector = DetectorConfig.from_dict(self.detector)
+        if self.threshold_selection not in THRESHOLD_SELECTIONS:
+            raise ConfigError("unknown stance-threshold selection", column="threshold_selection",
+                              expected=list(THRESHOLD_SELECTIONS), found=self.threshold_selection)
+        if self.threshold_selection != "none" and self.detector.method not in SHOE_METHODS:
+            raise ConfigError("the stance-threshold selection chooses SHOE thresholds: use a "
+                              "SHOE-based detector, or threshold_selection = \"none\" to use "
+                              f"the {self.detector.method} detector with its own threshold",
+                              column="detector.method", expected=list(SHOE_METHODS),
+                              found=self.detector.method)
+        for name in ("selection_fixed", "selection_relative"):
+            v = tuple(float(x) for x in getattr(self, name))
+            if len(v) != 3 or not all(np.isfinite(v)) or v[2] <= 0 or v[1] < v[0]:
+                raise ConfigError("a candidate grid is [log10 start, stop, step] with stop >= "
+                                  "start and step > 0", column=name, found=getattr(self, name))
+            setattr(self, name, v)
+        for name in ("zaru", "smooth", "level_floor", "baro"):  # TOML "yes" is not true
+            if not isinstance(getattr(self, name), (bool, np.bool_)):
+                raise ConfigError("must be true or false", column=name, expected="boolean",
+                                  found=repr(getattr(self, name)))
+        for name, low in (("level_floor_std", 0.0), ("level_floor_max_step", 0.0),
+                          ("baro_std", 0.0), ("baro_interval", None),
+                          ("baro_offset_psd", None), ("stride_height_noise", None)):
+            v = getattr(self, name)
+            ok = isinstance(v, (int, float, np.number)) and not isinstance(v, bool) \
+                and np.isfinite(v) and (v > 0 if low is not None else v >= 0)
+            if not ok:
+                raise ConfigError("must be a finite number " + ("> 0" if low is not None
+                                                                  else ">= 0"),
+                                  column=name, found=repr(v))
+        if self.level_floor_std >= self.level_floor_max_step:
+            # a floor sigma as large as the step that switches the constraint off is no floor
+            raise ConfigError("level_floor_std must be below level_floor_max_step",
+                              column="level_floor_std", expected=f"< {self.level_floor_max_step}",
+                              found=self.level_floor_std)
+        if self.stride_height_noise >= 1.0:
+            raise ConfigError("stride_height_noise is a fraction of the stride length",
+                              column="stride_height_noise", expected="0 <= x < 1",
+                              found=self.stride_height_noise)
         if int(self.update_every) < 1:
             raise ConfigError("update_every must be >= 1", column="update_every",
                               found=self.update_every)
@@ -196,7 +308,10 @@ class FootResult:
     ``std`` holds the forward standard deviations, ``biases`` the bias estimates, ``stillness``
     the detector output and ``innovations`` the ZUPT (``zupt_*``) and ZARU (``zaru_*``)
     innovations (NaN where no update); ``filter`` is the engine's result (innovation log,
-    nodes, timing).
+    nodes, timing); ``selection`` the stance-threshold choice (None when the detector decided
+    alone or the stances were given); ``height_aiding`` what the height aiding did
+    (``{"level_floor": {"applied", "skipped"}, "baro": {"column", "readings"},
+    "stride_height_noise": releases}``, empty without aiding).
     """
 
     trajectory: pd.DataFrame
@@ -208,6 +323,8 @@ class FootResult:
     n_updates: int
     initial: NavState
     filter: object = None
+    selection: ThresholdSelection | None = None
+    height_aiding: dict = field(default_factory=dict)
 
 
 # --- front end -------------------------------------------------------------------------------
@@ -307,8 +424,64 @@ def foot_measurements(t, gyro, still, stat, bg0, cfg: FootConfig) -> list:
     return out
 
 
+class _Epochs(Measurement):
+    """Filter epochs without a measurement (where extra process noise is added)."""
+
+    name = "epochs"
+
+    def evaluate(self, i, nav):
+        return None
+
+
+def height_aiding(t, still, cfg: FootConfig, baro: pd.DataFrame | None = None,
+                  east_north: np.ndarray | None = None) -> tuple[list, pd.DataFrame | None]:
+    """The height-aiding measurements of a foot run and the per-stride height noise.
+
+    Parameters
+    ----------
+    t, still : array
+        Sample times [s] and stance flags.
+    cfg : FootConfig
+        ``level_floor*``, ``baro*`` and ``stride_height_noise`` settings.
+    baro : DataFrame, optional
+        Barometer readings (a :data:`~.filter.height_aiding.BARO_COLUMNS` column) indexed by
+        time; used when ``cfg.baro``.
+    east_north : (N, 2) array, optional
+        Horizontal positions [m] of a forward pass: the length ``L`` of the stride starting at
+        each stance release is the distance between the mean positions of the two still runs
+        (:func:`insgnss.strides.stance_positions`); without it no per-stride noise is added.
+
+    Returns
+    -------
+    measurements, extra_noise
+        Measurement models and the ``FilterConfig.extra_noise`` table (``up_std = k L`` at
+        the last still sample of each run but the final one), or ``([], None)`` when no
+        height aiding applies.
+    """
+    meas: list = []
+    runs = still_runs(still)
+    if cfg.level_floor and len(runs) > 1:
+        meas.append(LevelFloor([(t[a], t[b - 1]) for a, b in runs], std=cfg.level_floor_std,
+                               max_step=cfg.level_floor_max_step))
+    if cfg.baro and baro is not None and len(baro):
+        meas.append(BaroHeight(baro, std=cfg.baro_std, interval=cfg.baro_interval,
+                               offset_psd=cfg.baro_offset_psd))
+    if not meas:
+        return [], None
+    noise = None
+    if east_north is not None and cfg.stride_height_noise > 0 and len(runs) > 1:
+        p = stance_positions(east_north, still, min_samples=1)
+        length = np.linalg.norm(np.diff(p, axis=0), axis=1)
+        release = t[runs[:-1, 1] - 1]
+        noise = pd.DataFrame({"up_std": cfg.stride_height_noise * length},
+                             index=pd.Index(release, name="time"))
+        meas.append(_Epochs(release))
+    return meas, noise
+
+
 def foot_filter_arrays(t, dth, dv, gyro, still, stat, initial: NavState, bg0,
-                       cfg: FootConfig) -> dict:
+                       cfg: FootConfig, extra: tuple[list, pd.DataFrame | None] = ([], None)
+                       ) -> dict:
     """Array core of :func:`run_foot_ins`: increments ``dth, dv`` (N,3), rates ``gyro`` (N,3)
     for the ZARU sample selection, ``still`` flags, detector statistic ``stat`` (NaN: no soft
     ZUPT), initial state and gyro bias. Returns a dict: ``nav``, ``nav_smoothed`` (N,9
@@ -318,8 +491,10 @@ def foot_filter_arrays(t, dth, dv, gyro, still, stat, initial: NavState, bg0,
     t = _arr(t)
     dt = float(np.median(np.diff(t)))
     fcfg = foot_filter_config(cfg, bg0, dt, float(t[-1] - t[0]))
-    meas = foot_measurements(t, gyro, still, stat, bg0, cfg)
-    model = StrapdownModel.from_increments(t, _arr(dth), _arr(dv), initial, [], fcfg)
+    fcfg.extra_noise = extra[1]
+    meas = foot_measurements(t, gyro, still, stat, bg0, cfg) + list(extra[0])
+    extras = [x for m in meas for x in m.extra_states()]  # the barometer's offset state
+    model = StrapdownModel.from_increments(t, _arr(dth), _arr(dv), initial, extras, fcfg)
     res = run_engine(model, meas, fcfg)
     if not res.complete:
         raise FilterHealthError(f"foot-mounted filter stopped: {res.error}",
@@ -341,6 +516,19 @@ def foot_filter_arrays(t, dth, dv, gyro, still, stat, initial: NavState, bg0,
             "n_updates": int(ok.sum()), "result": res}
 
 
+def _baro_table(imu: pd.DataFrame, baro: pd.DataFrame | None) -> pd.DataFrame | None:
+    """The barometer readings of a run: ``baro`` if given, else the first
+    :data:`~.filter.height_aiding.BARO_COLUMNS` column of the IMU table (None without)."""
+    if baro is not None:
+        return baro
+    cols = [c for c in BARO_COLUMNS if c in imu.columns]
+    if not cols:
+        return None
+    b = imu[[cols[0]]]
+    b = b[np.isfinite(b[cols[0]].to_numpy(float))]
+    return b if len(b) else None
+
+
 def run_foot_ins(
     imu: pd.DataFrame,
     config: FootConfig | None = None,
@@ -350,21 +538,27 @@ def run_foot_ins(
     lat: float = 0.0,
     lon: float = 0.0,
     height: float = 0.0,
+    baro: pd.DataFrame | None = None,
 ) -> FootResult:
     """Foot-mounted ZUPT(+ZARU) INS on an IMU table (body RFU, rates or increments).
 
     Parameters
     ----------
     imu : DataFrame
-        IMU table indexed by time [s], body frame right-forward-up.
+        IMU table indexed by time [s], body frame right-forward-up; an optional ``pressure``
+        [Pa] or ``baro_height`` [m] column is barometer height (``config.baro``).
     config : FootConfig, optional
-        Settings (default: the foot preset).
+        Settings (default: the foot profile).
     initial : NavState, optional
         Initial state; by default levelled from the first still window with heading
         ``config.heading`` at (``lat``, ``lon``, ``height``) [rad, rad, m].
     still : Stillness, bool Series or array, optional
         Declared still samples (a :class:`Stillness` also brings its statistic for the soft
-        ZUPT); by default ``config.detector`` decides.
+        ZUPT); by default ``config.detector`` decides, with the threshold chosen per recording
+        when ``config.threshold_selection = "innovation"``.
+    baro : DataFrame, optional
+        Barometer readings indexed by time with a ``pressure`` or ``baro_height`` column, in
+        place of the IMU table's.
 
     Returns
     -------
@@ -372,7 +566,28 @@ def run_foot_ins(
     """
     cfg = config or FootConfig()
     t, gyro, acc = imu_rates(imu)
-    if still is None:
+    _, dth, dv = increments(imu)
+    given = initial
+
+    def start(flags):
+        if given is not None:
+            return given, np.zeros(3)
+        return initial_state(t, gyro, acc, flags, cfg, lat, lon, height)
+
+    fwd_cfg = replace(cfg, smooth=False)
+
+    def forward(flags, stat_):
+        ini, b0 = start(flags)
+        return foot_filter_arrays(t, dth, dv, gyro, flags, stat_, ini, b0, fwd_cfg), ini
+
+    selection = None
+    if still is None and cfg.threshold_selection == "innovation":
+        stat, _ = statistic_arrays(t, gyro, acc, cfg.detector)
+        selection = select_threshold(
+            t, stat, cfg.detector, lambda f: forward(f, stat)[0]["innovations"][:, :3],
+            cfg.selection_fixed, cfg.selection_relative)
+        st_flags, thr = selection.still, selection.threshold
+    elif still is None:
         st_flags, stat, thr = detect_arrays(t, gyro, acc, cfg.detector)
     elif isinstance(still, Stillness):
         st_flags = still.still.to_numpy(bool)
@@ -388,11 +603,14 @@ def run_foot_ins(
                               expected=t.size, found=st_flags.size)
         stat = np.full(t.size, np.nan)
         thr = np.full(t.size, np.nan)
-    bg0 = np.zeros(3)
-    if initial is None:
-        initial, bg0 = initial_state(t, gyro, acc, st_flags, cfg, lat, lon, height)
-    _, dth, dv = increments(imu)
-    out = foot_filter_arrays(t, dth, dv, gyro, st_flags, stat, initial, bg0, cfg)
+    initial, bg0 = start(st_flags)
+    baro = _baro_table(imu, baro)
+    extra = height_aiding(t, st_flags, cfg, baro)
+    if extra[0] and cfg.stride_height_noise > 0:  # stride lengths from a forward pass
+        f, ini = forward(st_flags, stat)
+        en = _enu(f["nav"], ini.lat, ini.lon, ini.height)[:, :2]
+        extra = height_aiding(t, st_flags, cfg, baro, en)
+    out = foot_filter_arrays(t, dth, dv, gyro, st_flags, stat, initial, bg0, cfg, extra)
     nav, nav_s, bias, std, nu, nupd = (out[k] for k in ("nav", "nav_smoothed", "bias", "std",
                                                         "innovations", "n_updates"))
     idx = pd.Index(t, name="time")
@@ -405,13 +623,27 @@ def run_foot_ins(
 
     fwd = table(nav)
     traj = table(nav_s) if cfg.smooth else fwd
+    method = ("select" if selection is not None else cfg.detector.method) if still is None \
+        else getattr(still, "method", "declared")
     stillness = Stillness(pd.Series(st_flags, idx, name="still"),
                           pd.Series(stat, idx, name="statistic"),
-                          pd.Series(thr, idx, name="threshold"),
-                          cfg.detector.method if still is None else
-                          getattr(still, "method", "declared"))
+                          pd.Series(thr, idx, name="threshold"), method)
     innov = pd.DataFrame(nu, index=idx, columns=["zupt_e", "zupt_n", "zupt_u", "zaru_x", "zaru_y",
                                                  "zaru_z"])
     return FootResult(traj, fwd, pd.DataFrame(std, index=idx, columns=STD_COLS),
                       pd.DataFrame(bias, index=idx, columns=BIAS_COLS), stillness, innov,
-                      int(nupd), initial, out["result"])
+                      int(nupd), initial, out["result"], selection, _aiding_report(*extra))
+
+
+def _aiding_report(meas: list, noise: pd.DataFrame | None) -> dict:
+    """What the height aiding of a run did (:attr:`FootResult.height_aiding`)."""
+    rep: dict = {}
+    for m in meas:
+        if isinstance(m, LevelFloor):
+            rep["level_floor"] = {"applied": m.applied, "skipped": m.skipped}
+        elif isinstance(m, BaroHeight):
+            rep["baro"] = {"column": m.source_column, "readings": int(m.times.size)}
+    if noise is not None:
+        rep["stride_height_noise"] = {"releases": int(len(noise)),
+                                      "up_std_median_m": float(np.median(noise["up_std"]))}
+    return rep

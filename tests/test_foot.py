@@ -252,9 +252,30 @@ def test_stillness_object_drives_soft_zupt(walk):
 def test_config_errors():
     with pytest.raises(ConfigError, match="unknown foot-mounted settings"):
         FootConfig.from_dict({"sigma_zup": 0.1})
-    cfg = FootConfig.from_dict({"sigma_zupt": 0.02, "detector": {"method": "are",
-                                                                 "threshold": 0.3}})
+    cfg = FootConfig.from_dict({"sigma_zupt": 0.02, "threshold_selection": "none",
+                                "detector": {"method": "are", "threshold": 0.3}})
     assert cfg.detector.method == "are" and cfg.to_dict()["detector"]["threshold"] == 0.3
+    with pytest.raises(ConfigError, match="threshold_selection"):
+        FootConfig.from_dict({"detector": {"method": "are", "threshold": 0.3}})
+    with pytest.raises(ConfigError, match="unknown stance-threshold selection"):
+        FootConfig(threshold_selection="oracle")
+    with pytest.raises(ConfigError, match="candidate grid"):
+        FootConfig(selection_fixed=(9.0, 5.0, 0.25))
+    with pytest.raises(ConfigError, match="candidate grid"):
+        FootConfig(selection_relative=(0.0, 1.0))
+    assert FootConfig.from_dict({"selection_fixed": [6, 8, 0.5]}).selection_fixed == (6, 8, 0.5)
+    with pytest.raises(ConfigError):
+        FootConfig(level_floor_std=0.0)
+    with pytest.raises(ConfigError):
+        FootConfig(stride_height_noise=-0.01)
+    with pytest.raises(ConfigError, match="true or false"):
+        FootConfig(level_floor="yes")
+    with pytest.raises(ConfigError, match="finite number"):
+        FootConfig(level_floor_max_step="5 cm")
+    with pytest.raises(ConfigError, match="below level_floor_max_step"):
+        FootConfig(level_floor=True, level_floor_std=0.05)
+    with pytest.raises(ConfigError, match="fraction"):
+        FootConfig(stride_height_noise=1.5)
     with pytest.raises(ConfigError):
         FootConfig(update_every=0)
 
@@ -323,3 +344,13 @@ def test_pyshoe_trials_armse(pyshoe_dir):
         errs[trial] = sc.armse_2d(sol[["x", "y", "z"]].to_numpy(), sc.sio.loadmat(mat)["gt"])
         assert errs[trial] < limit, (trial, errs[trial])
     assert np.mean(list(errs.values())) < 0.07
+
+
+def test_foot_mounted_scenario_is_the_profile():
+    """scenarios/foot_mounted.toml writes the defaults out: it must stay equal to them."""
+    import tomllib
+    from pathlib import Path
+
+    doc = tomllib.loads((Path(__file__).resolve().parents[1] / "scenarios" /
+                         "foot_mounted.toml").read_text())
+    assert FootConfig.from_dict(doc["foot"]).to_dict() == FootConfig().to_dict()

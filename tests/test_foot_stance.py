@@ -75,3 +75,31 @@ def test_selection_picks_a_consistent_threshold(walk_and_run):
     high = tab[(tab.family == "fixed") & (tab.log10 == 9.0)].iloc[0]
     assert high.rms > 5 * chosen.rms and high.criterion > 5 * chosen.criterion
     assert sel.still.dtype == bool and sel.still.shape == t.shape
+
+
+def test_run_foot_ins_selects_by_default(walk_and_run):
+    w, imu = walk_and_run
+    tr = w.truth
+    site = dict(lat=tr.lat.iloc[0], lon=tr.lon.iloc[0], height=tr.height.iloc[0])
+    r = run_foot_ins(imu, FootConfig(), **site)
+    assert r.selection is not None and r.stillness.method == "select"
+    assert len(r.selection.table) == 29  # 17 fixed + 12 valley candidates
+    np.testing.assert_array_equal(r.stillness.still.to_numpy(), r.selection.still)
+    # the same choice as select_threshold with the foot INS's forward pass
+    det = FootConfig().detector
+    t, gyro, acc = imu_rates(imu)
+    stat, _ = statistic_arrays(t, gyro, acc, det)
+    idx = pd.Index(t)
+    fwd = FootConfig(smooth=False)
+
+    def forward(still):
+        st = Stillness(pd.Series(still, idx), pd.Series(stat, idx), pd.Series(stat, idx), "x")
+        return run_foot_ins(imu, fwd, still=st, **site).innovations[
+            ["zupt_e", "zupt_n", "zupt_u"]].to_numpy()
+
+    sel = select_threshold(t, stat, det, forward)
+    assert (sel.family, sel.log10) == (r.selection.family, r.selection.log10)
+    assert sel.criterion == pytest.approx(r.selection.criterion, rel=1e-9)
+    # without the selection the valley detector decides alone (factor 10)
+    r0 = run_foot_ins(imu, FootConfig(threshold_selection="none"), **site)
+    assert r0.selection is None and r0.stillness.method == "valley"

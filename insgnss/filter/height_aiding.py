@@ -46,6 +46,9 @@ from ..errors import InputFormatError, InvalidValueError
 from .measurements import Measurement
 from .models import ExtraState
 
+#: IMU-table columns a barometer may come in: height [m] or static pressure [Pa]
+BARO_COLUMNS = ("baro_height", "pressure")
+
 
 class LevelFloor(Measurement):
     """Successive stances at the same height (see the module docstring).
@@ -170,4 +173,4 @@ class BaroHeight(Measurement):
         return (np.array([nav.height + b - self.height[i]]), H, np.array([[self.std**2]]))
 
 
-__all__ = ["BaroHeight", "LevelFloor"]
+__all__ = ["BARO_COLUMNS", "BaroHeight", "LevelFloor"]

@@ -130,6 +130,7 @@ def run_riss(ctx: RunContext) -> JobResult:
 def run_foot(ctx: RunContext) -> JobResult:
     """Foot-mounted pedestrian INS (:mod:`insgnss.foot`): compiled ZUPT/ZARU filter and
     smoother; heading unobservable, so it is given (``[foot] heading``, default 0)."""
+    from ..filter.height_aiding import BARO_COLUMNS
     from ..foot import FootConfig, run_foot_ins
     from ..strides import walk_distances
 
@@ -141,12 +142,14 @@ def run_foot(ctx: RunContext) -> JobResult:
     h = ini["height"] or 0.0
     c0 = time.perf_counter()
     imu = inputs.imu
+    baro = [c for c in BARO_COLUMNS if c in imu.columns]
+    baro = imu[baro[:1]] if baro else None  # barometer height (the IMU table's column)
     if job["filter"]["coning"]:
         # the same two-sample coning/sculling correction the engine applies (docs/zupt.md:
         # without it integrated increments make a 60 Hz foot INS climb 0.4 m per 100 m)
         t, dth, dv = increments(imu)
         imu = increments_table(t, *coning_sculling(dth, dv))
-    fr = run_foot_ins(imu, cfg, lat=lat, lon=lon, height=h)
+    fr = run_foot_ins(imu, cfg, lat=lat, lon=lon, height=h, baro=baro)
     run_s = time.perf_counter() - c0
     inn = fr.innovations.reset_index()
     inn = inn.rename(columns={inn.columns[0]: "time"})
@@ -174,6 +177,11 @@ def run_foot(ctx: RunContext) -> JobResult:
                                   "rejected": 0, "recovered": 0, "unusable": 0}},
         "aiding_warnings": [],
         "distance": distance,
+        "stance_threshold": None if fr.selection is None else {
+            "selection": "innovation", "family": fr.selection.family,
+            "log10": fr.selection.log10, "stance_entry_rms_m_s": fr.selection.criterion,
+            "candidates": len(fr.selection.table)},
+        "height_aiding": fr.height_aiding,
         "imu": ctx.imu_report, "preprocessing": ctx.preprocessing,
         "timing_s": {**ctx.timing, "total": run_s,
                      "job_total": time.perf_counter() - ctx.t_start},
