@@ -26,8 +26,9 @@ scale factors, non-orthogonality, g-sensitivity, gravity, noise).
 filters, accelerometer size effect, rate-dependent gyro scale and accelerometer nonlinearity,
 each applied on the simulated walk's 4 kHz grid, then compensated over a range of sizes on the
 real tracks (end height and the RMS ZUPT innovation at stance entry).
-``--only level_floor``: ZUPT at the preset's stances in the general engine without and with
-:class:`insgnss.filter.height_aiding.LevelFloor` on the real tracks.
+``--only level_floor``: the default table without and with ``[foot] level_floor``
+(:class:`insgnss.filter.height_aiding.LevelFloor` and the per-stride height noise, docs/zupt.md
+section 7).
 
 Usage::
 
@@ -41,6 +42,7 @@ import argparse
 import json
 import sys
 import time
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -247,75 +249,33 @@ def print_sim(rows: list[dict]) -> None:
         print(f"{r['effect']:52s} {r['dh']:+10.3f} {r['dxy']:11.3f}")
 
 
-# --- the level-floor measurement on the real tracks, in the general engine ------------------
-def level_floor_engine(imu, cfg: FootConfig, site, std: float = 0.002,
-                       level_floor: bool = True):
-    """ZUPT at the foot preset's stance samples (+ LevelFloor between stances) in the general
-    engine (insgnss.filter.run_filter): a demonstration of the measurement model until the
-    foot filter runs on the engine. Returns the forward solution (east, north, up)."""
-    from insgnss.detect import detect_stillness, imu_rates
-    from insgnss.earth import geodetic_to_enu
-    from insgnss.filter import run_filter
-    from insgnss.filter.engine import FilterConfig
-    from insgnss.filter.height_aiding import LevelFloor
-    from insgnss.filter.measurements import Zupt
-    from insgnss.foot import initial_state
-    from insgnss.imu import ImuErrorModel
-    from insgnss.strides import still_runs
-
-    stl = detect_stillness(imu, cfg.detector)
-    st = stl.still.to_numpy()
-    t, gyro, acc = imu_rates(imu)
-    init, bg0 = initial_state(t, gyro, acc, st, cfg, *site)
-    model = ImuErrorModel(gyro_bias=cfg.init_gyro_bias_std, accel_bias=cfg.init_accel_bias_std,
-                          gyro_bias_instability=cfg.gyro_bias_rw, accel_bias_instability=
-                          cfg.accel_bias_rw, bias_correlation_time=1e6, gyro_arw=cfg.gyro_psd,
-                          accel_vrw=cfg.accel_psd)
-    fc = FilterConfig(imu_model=model, propagation_interval=0.01, epoch_interval=0.5,
-                      gate_probability=0, gate_recovery=None, smoother=False,
-                      initial_pos_std=cfg.init_pos_std, initial_vel_std=cfg.init_vel_std,
-                      initial_att_std=(cfg.init_att_std, cfg.init_att_std,
-                                       cfg.init_heading_std), gyro_bias=tuple(bg0),
-                      nis_window=None, check_health=False)
-    meas = [Zupt(t[st][1:], std=cfg.sigma_zupt)]
-    if level_floor:
-        meas.append(LevelFloor([(t[a], t[b - 1]) for a, b in still_runs(st)], std=std))
-    f = run_filter(imu, init, meas, fc).forward
-    return np.column_stack(geodetic_to_enu(f.lat.values, f.lon.values, f.height.values,
-                                           init.lat, init.lon, init.height))
-
-
-def run_level_floor(cfg: FootConfig) -> list[dict]:
-    """End height and horizontal metric of the engine with ZUPT, without and with LevelFloor,
-    on x-io, UCR and the PyShoe walking trials."""
+# --- the level floor on the real tracks (the foot INS with [foot] level_floor) -------------
+def run_level_floor(cfg: FootConfig, forward: bool = False) -> list[dict]:
+    """The default table twice: the foot INS without and with ``level_floor`` (and its
+    per-stride height noise), on every track; rows carry ``level_floor``."""
     rows = []
-    for name in ("short_walk", "long_walk"):
-        imu = read_xio(name)
-        for lf in (False, True):
-            p = level_floor_engine(imu, cfg, SITES["xio"], level_floor=lf)
-            rows.append({"track": f"xio {name.split('_')[0]}", "level_floor": lf,
-                         "horizontal": float(np.hypot(*p[-1, :2])), "height_err": p[-1, 2]})
-    for side in ("left", "right"):
-        imu = read_ucr(side)
-        truth = ucr_truth(side)
-        for lf in (False, True):
-            p = level_floor_engine(imu, cfg, SITES["ucr"], level_floor=lf)
-            n = min(len(p), len(truth))
-            a, b = p[:n, [1, 0]], truth[:n, :2]
-            R, c = rigid_fit_2d(a, b)
-            rows.append({"track": f"ucr {side}", "level_floor": lf,
-                         "horizontal": float(np.sqrt(np.mean(np.sum((a @ R.T + c - b) ** 2,
-                                                                    axis=1)))),
-                         "height_err": float(p[n - 1, 2] + (truth[n - 1, 2] - truth[0, 2]))})
-    for mat in sorted((DATA / "pyshoe-vicon").glob("2017-11-22-*.mat")):
-        imu, truth = convert.to_insgnss(mat)
-        tz = truth["z"].to_numpy()
-        for lf in (False, True):
-            p = level_floor_engine(imu, cfg, SITES["pyshoe"], level_floor=lf)
-            rows.append({"track": f"pyshoe {mat.stem}", "level_floor": lf,
-                         "horizontal": float("nan"),
-                         "height_err": float(p[-1, 2] - (tz[-1] - tz[0]))})
+    for lf in (False, True):
+        rows += [{**r, "level_floor": lf} for r in run_all(replace(cfg, level_floor=lf), forward)]
     return rows
+
+
+def print_level_floor(rows: list[dict]) -> None:
+    off = {r["track"]: r for r in rows if not r["level_floor"]}
+    print("foot INS without / with [foot] level_floor:")
+    print(f"{'track':30s} {'metric':13s} {'horiz off':>9s} {'horiz on':>9s} {'dh off':>7s} "
+          f"{'dh on':>7s}")
+    for r in rows:
+        if r["level_floor"]:
+            o = off[r["track"]]
+            print(f"{r['track']:30s} {r['metric']:13s} {o['horizontal']:9.3f} "
+                  f"{r['horizontal']:9.3f} {o['height_err']:+7.3f} {r['height_err']:+7.3f}")
+    for lf in (False, True):
+        ps = [r for r in rows if r["track"].startswith("pyshoe") and r["level_floor"] == lf]
+        if ps:
+            dh = np.abs([r["height_err"] for r in ps])
+            print(f"PyShoe level_floor={lf!s:5s}: mean ARMSE "
+                  f"{np.mean([r['horizontal'] for r in ps]):.4f} m, |dh end| mean "
+                  f"{dh.mean():.3f} max {dh.max():.3f} m, {int(np.sum(dh > 0.15))} above 0.15 m")
 
 
 # --- second round: sensor effects (anti-aliasing, size effect, nonlinearity) ---------------
@@ -501,14 +461,8 @@ def main(argv: list[str] | None = None) -> int:
         print(json.dumps(rows, indent=1)) if a.json else print_sim(rows)
         return 0
     if a.only == "level_floor":
-        rows = run_level_floor(cfg)
-        if a.json:
-            print(json.dumps(rows, indent=1))
-        else:
-            print("engine, ZUPT at the foot preset's stances, without / with LevelFloor:")
-            for r in rows:
-                print(f"{r['track']:30s} level_floor={r['level_floor']!s:5s} "
-                      f"horiz {r['horizontal']:7.3f}  dh end {r['height_err']:+7.3f}")
+        rows = run_level_floor(cfg, a.forward)
+        print(json.dumps(rows, indent=1)) if a.json else print_level_floor(rows)
         return 0
     if a.only:
         rows = {"xio": run_xio, "ucr": run_ucr, "pyshoe": run_pyshoe}[a.only](cfg, a.forward)
