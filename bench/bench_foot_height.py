@@ -195,8 +195,8 @@ def sim_effects(cfg: FootConfig) -> list[dict]:
 
     rows = []
 
-    def add(name, w, imu, **kw):
-        dh, dxy = _sim_error(w, imu, cfg, **kw)
+    def add(name, w, imu, config=None, **kw):
+        dh, dxy = _sim_error(w, imu, config or cfg, **kw)
         rows.append({"effect": name, "dh": dh, "dxy": dxy})
 
     def cs(imu):
@@ -233,12 +233,18 @@ def sim_effects(cfg: FootConfig) -> list[dict]:
                     ("accel y-z non-orthogonality 0.1 deg", np.eye(3) + np.radians(0.1) *
                      np.array([[0, 0, 0], [0, 0, 1], [0, 1, 0]]))):
         add(name, w, increments_table(t, dth, dv @ m.T))
+    add("  vertical accel scale 1 %, [foot] level_floor", w,
+        increments_table(t, dth, dv @ np.diag([1, 1, 1.01]).T),
+        config=replace(cfg, level_floor=True))
     G = np.radians(0.1) / 9.80665 * np.eye(3)  # gyro g-sensitivity 0.1 deg/s/g
     add("gyro g-sensitivity 0.1 deg/s/g", w, increments_table(t, dth + dv @ G.T, dv))
     add("gravity error 0.016 m/s^2 (latitude 20 deg off)", w, w.ideal,
         lat_offset=np.radians(20.0))
     noisy = simulate_imu(w.ideal, ImuErrorModel(gyro_arw=6.1e-5, accel_vrw=1.4e-3), 1).imu
-    add("VN-100 noise, adaptive detector", w, noisy, still=None)
+    add("VN-100 noise, profile detector", w, noisy, still=None)
+    add("  same, + vertical accel scale 1 %, [foot] level_floor", w,
+        increments_table(*(lambda tt, a, b: (tt, a, b @ np.diag([1, 1, 1.01]).T))(
+            *increments(noisy))), config=replace(cfg, level_floor=True), still=None)
     return rows
 
 
