@@ -233,7 +233,7 @@ def sim_effects(cfg: FootConfig) -> list[dict]:
                     ("accel y-z non-orthogonality 0.1 deg", np.eye(3) + np.radians(0.1) *
                      np.array([[0, 0, 0], [0, 0, 1], [0, 1, 0]]))):
         add(name, w, increments_table(t, dth, dv @ m.T))
-    add("  vertical accel scale 1 %, [foot] level_floor", w,
+    add("vertical accel scale 1 % + [foot] level_floor", w,
         increments_table(t, dth, dv @ np.diag([1, 1, 1.01]).T),
         config=replace(cfg, level_floor=True))
     G = np.radians(0.1) / 9.80665 * np.eye(3)  # gyro g-sensitivity 0.1 deg/s/g
@@ -242,9 +242,10 @@ def sim_effects(cfg: FootConfig) -> list[dict]:
         lat_offset=np.radians(20.0))
     noisy = simulate_imu(w.ideal, ImuErrorModel(gyro_arw=6.1e-5, accel_vrw=1.4e-3), 1).imu
     add("VN-100 noise, profile detector", w, noisy, still=None)
-    add("  same, + vertical accel scale 1 %, [foot] level_floor", w,
-        increments_table(*(lambda tt, a, b: (tt, a, b @ np.diag([1, 1, 1.01]).T))(
-            *increments(noisy))), config=replace(cfg, level_floor=True), still=None)
+    tn, dthn, dvn = increments(noisy)
+    add("  same + vertical accel scale 1 % + [foot] level_floor", w,
+        increments_table(tn, dthn, dvn @ np.diag([1, 1, 1.01]).T),
+        config=replace(cfg, level_floor=True), still=None)
     return rows
 
 
