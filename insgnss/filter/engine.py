@@ -247,8 +247,9 @@ class FilterResult:
     smoothed : DataFrame or None
         The same columns from the smoother (:mod:`.smoother`).
     innovations : DataFrame
-        One row per measurement evaluated: ``time type dof nis threshold accepted recovered`` and
-        ``innov_k``, ``innov_std_k`` for each component.
+        One row per measurement evaluated: ``time type label dof nis threshold accepted
+        recovered`` and ``innov_k``, ``innov_std_k`` for each component (``label``: the row's
+        ``Measurement.row_label``, e.g. the satellite of a pseudorange; empty otherwise).
     rejected : DataFrame
         The rows of ``innovations`` that the gate rejected.
     complete : bool
@@ -275,8 +276,9 @@ class FilterResult:
         The applied updates: rows ``r0[e] .. r1[e]-1`` of ``H``, ``K`` (transposed), ``G =
         S^-1 H``, ``s = S^-1 z`` belong to node ``e`` (:class:`insgnss.filter.store.NodeStore`).
     log : dict
-        The innovation log as arrays (``time tid dof nis threshold accepted recovered innov
-        innov_std`` and ``names``: the measurement type of each ``tid``).
+        The innovation log as arrays (``time tid lid dof nis threshold accepted recovered innov
+        innov_std``, ``names``: the measurement type of each ``tid``, and ``labels``: the row
+        label of each ``lid``).
     high_rate : dict or None
         The samples of the compiled high-rate path (times, IMU rows, ``F dt`` and ``Qd`` at the
         process model's ``pattern``, feedback, update rows ``r0 .. r1-1``, and ``Pp[Pp_index]``
@@ -321,6 +323,8 @@ class _Run:
         self.gates = GateTable(config.gate_probability, config.gate_probabilities)
         self.recovery = -1.0 if config.gate_recovery is None else float(config.gate_recovery)
         self.streak = np.zeros((max(len(names), 1), 3))
+        self.streak_rows: dict = {}  # (type, row label) -> row of streak (labelled rows)
+        self.last_accept = np.full(max(len(names), 1), -np.inf)  # per type
         self.log = InnovationLog(names)
         self.check = bool(config.check_health)
         self.timing = {"updates": 0.0}
@@ -403,20 +407,41 @@ def _as_arrays(z, H, R):
     return z, H, R
 
 
-def _gate(run: _Run, m, time: float, z, H, R, P):
+def _streak_row(run: _Run, tid: int, label: str) -> int:
+    """Row of the gate-streak array of measurement type ``tid`` and row label ``label`` (the
+    type's own row without a label; a new row the first time a label appears)."""
+    if not label:
+        return tid
+    key = (tid, label)
+    row = run.streak_rows.get(key)
+    if row is None:
+        row = run.streak_rows[key] = run.streak.shape[0]
+        run.streak = np.vstack([run.streak, np.zeros((1, 3))])
+    return row
+
+
+def _gate(run: _Run, m, time: float, z, H, R, P, label: str = ""):
     """Gate one measurement against the predicted ``P``: ``(accepted, P, S, nis)``; a gate
-    recovery returns the inflated ``P``."""
+    recovery returns the inflated ``P``. A labelled row (one satellite of a pseudorange model)
+    keeps its own rejection streak, and recovers only when no measurement of its type was
+    accepted for longer than the recovery time (:mod:`.gating`, "Labelled rows")."""
     S = H @ P @ H.T + R
     nis = gating.nis(S, z)
     tid = run.tid[m.name]
     run.runaway.push(tid, m.name, time, nis / z.size)
     thr = run.gates.threshold(run.gates.probability(m), z.size)
-    code = gating.gate_step(run.streak, tid, time, nis, thr, run.recovery)
+    row = _streak_row(run, tid, label)  # may grow run.streak: before passing the array
+    code = gating.gate_step(run.streak, row, time, nis, thr, run.recovery)
+    if code == gating.RECOVER and label and \
+            not gating.type_lost(run.last_accept[tid], time, run.recovery):
+        code = gating.REJECT  # the other rows of the type are accepted: this row is bad
     if code == gating.RECOVER:
         P = P.copy()
         S = gating.inflate_for(P, H, R, z, thr, run.model.n_nav)
         nis = gating.nis(S, z)
-    run.log.add(time, tid, nis, thr, code != gating.REJECT, code == gating.RECOVER, z, S)
+    if code != gating.REJECT:
+        run.last_accept[tid] = time
+    run.log.add(time, tid, nis, thr, code != gating.REJECT, code == gating.RECOVER, z, S, label)
     return code != gating.REJECT, code == gating.RECOVER, P
 
 
@@ -429,14 +454,16 @@ def _update(run: _Run, e: int, x, P):
     for k in range(sched.ptr[e], sched.ptr[e + 1]):
         m = run.general[sched.ev_m[k]]
         time = sched.ev_t[k]
-        res = m.evaluate(int(sched.ev_r[k]), model.nominal(time))
+        row = int(sched.ev_r[k])
+        res = m.evaluate(row, model.nominal(time))
         if res is None:
             continue
         res = model.observe(m, *_as_arrays(*res))
         if res is None:
             continue
         z, H, R = res
-        ok, recovered, P = _gate(run, m, time, z, H, R, P)
+        label = m.row_label(row) if hasattr(m, "row_label") else ""
+        ok, recovered, P = _gate(run, m, time, z, H, R, P, label)
         if recovered:
             Pp = P  # the gate recovery inflated P(e|e-1): the smoother needs it
         if ok:
@@ -550,6 +577,7 @@ def _finish(run: _Run, completed: int, error, t_start: float) -> FilterResult:
     log = run.log.columns()
     innovations, rejected = innovation_tables(run.log, log)
     log["names"] = list(run.log.names)
+    log["labels"] = list(run.log.labels)
     timing["total"] = perf() - t_start
     updates = {"r0": store.r0[:n_ok], "r1": store.r1[:n_ok], "H": store.H[:store.n_rows],
                "K": store.K[:store.n_rows], "G": store.G[:store.n_rows],

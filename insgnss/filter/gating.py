@@ -22,6 +22,16 @@ sparse measurements are not force-applied.
 
 The streak state of all measurement types is one array ``streak[type] = (first, last, count)``
 (``count = 0``: no streak), so both update paths share it.
+
+Labelled rows
+-------------
+A model that gives one measurement per satellite at an epoch (pseudorange, Doppler) labels
+its rows (``row_label``). Each (type, label) keeps its own streak (a further row of the
+array), so the age of a streak is the unbroken rejection history of one satellite, never one
+inherited from another. A labelled streak recovers only when the type as a whole is lost
+(:func:`type_lost`: no measurement of the type accepted for longer than the recovery time):
+one satellite rejected while the others are accepted is a bad measurement (multipath, a
+wrong ephemeris), not a wrong covariance, and is never forced through.
 """
 
 from __future__ import annotations
@@ -32,8 +42,8 @@ from numba import njit
 from ..stats import chi2_ppf
 from .linalg import _innovation_cov, cholesky_into
 
-__all__ = ["GateTable", "gate_step", "inflate_for", "nis", "nis_into", "ACCEPT", "REJECT",
-           "RECOVER"]
+__all__ = ["GateTable", "gate_step", "inflate_for", "nis", "nis_into", "type_lost", "ACCEPT",
+           "REJECT", "RECOVER"]
 
 REJECT, ACCEPT, RECOVER = 0, 1, 2
 
@@ -111,6 +121,12 @@ def gate_step(streak, tid, time, nis_value, thr, recovery):
         streak[tid, 2] = 0.0
         return RECOVER
     return REJECT
+
+
+def type_lost(last_accept: float, time: float, recovery: float) -> bool:
+    """A labelled row may recover (module docstring, "Labelled rows"): no measurement of its
+    type was accepted within the last ``recovery`` seconds (``recovery < 0``: never)."""
+    return recovery >= 0.0 and time - last_accept > recovery
 
 
 @njit(cache=True)

@@ -34,8 +34,9 @@ two-state model of the oscillator's Allan-variance coefficients ``h0`` (white fr
 
 (Brown & Hwang 2012, 9.3, eqs. 9.3.10-9.3.11; Groves 2013 eq. 14.206). Other systems carry
 an inter-system bias ``isb_S`` [m] (random walk: hardware delays and the broadcast system
-time offsets drift slowly). The clock block needs the coupled ``Phi``/``Qd`` above from the
-filter engine's process model (see docs/tight.md, "What the engine must provide").
+time offsets drift slowly). The engine discretises the clock block from its continuous
+dynamics (:class:`.models.ExtraState` ``dynamics``/``noise``), which gives the ``Phi`` and
+``Qd`` above exactly.
 
 References
 ----------
@@ -109,26 +110,30 @@ class ReceiverClock:
                          [sg * dt**2 / 2.0, sg * dt]])
 
     def extra_state(self) -> ExtraState:
-        """The state block ``clock`` = (``clock_bias`` [m], ``clock_drift`` [m/s]).
-
-        Its ``psd`` holds ``(S_f, S_g)`` so that an engine without a coupled clock block still
-        gets the right diagonal noise; the coupling (``Phi[0, 1] = dt`` and the ``Qd``
-        cross terms) must come from :meth:`transition` / :meth:`process_noise`.
-        """
+        """The state block ``clock`` = (``clock_bias`` [m], ``clock_drift`` [m/s]): dynamics
+        ``[[0, 1], [0, 0]]`` and driving noise ``diag(S_f, S_g)``, which the engine discretises
+        into :meth:`transition` and :meth:`process_noise` (exact for this block); the nominal
+        bias follows ``b += d dt`` between updates."""
+        sf, sg = self.psd
         return ExtraState(self.name, 2, (self.bias_std, self.drift_std), np.inf, self.psd,
-                          (self.initial_bias, self.initial_drift), ("clock_bias", "clock_drift"))
+                          (self.initial_bias, self.initial_drift), ("clock_bias", "clock_drift"),
+                          dynamics=((0.0, 1.0), (0.0, 0.0)), noise=((sf, 0.0), (0.0, sg)))
 
     @classmethod
     def from_spp(cls, solution: pd.DataFrame, t0: float, reference: str = "G", **kw
                  ) -> ReceiverClock:
-        """Initial bias and drift from the SPP epoch nearest to ``t0`` (:func:`insgnss.gnss.spp`)."""
+        """Initial bias and drift at ``t0`` from the SPP epoch nearest to it
+        (:func:`insgnss.gnss.spp`), the bias carried to ``t0`` by the drift (a typical TCXO
+        drifts tens of m/s: the epoch one second away would be that far off)."""
         if solution.empty:
             raise InputFormatError("no SPP epoch to initialise the receiver clock")
-        k = int(np.argmin(np.abs(np.asarray(solution.index, float) - t0)))
+        ts = np.asarray(solution.index, float)
+        k = int(np.argmin(np.abs(ts - t0)))
         row = solution.iloc[k]
-        drift = row.get("clock_drift", 0.0)
-        return cls(initial_bias=float(row[f"clock_bias_{reference}"]),
-                   initial_drift=float(drift) if np.isfinite(drift) else 0.0, **kw)
+        drift = float(row.get("clock_drift", 0.0))
+        drift = drift if np.isfinite(drift) else 0.0
+        return cls(initial_bias=float(row[f"clock_bias_{reference}"]) + drift * (t0 - ts[k]),
+                   initial_drift=drift, **kw)
 
 
 def inter_system_bias_state(system: str, initial_value: float = 0.0, std: float = 10.0,
@@ -214,10 +219,6 @@ class RawGnssMeasurement(Measurement):
             inter_system_bias_state(s, self.isb_initial.get(s, 0.0), self.isb_std, self.isb_psd)
             for s in self.other_systems]
 
-    def process_blocks(self) -> dict:
-        """Coupled process models of extra-state blocks: ``{"clock": ReceiverClock}``."""
-        return {self.clock.name: self.clock}
-
     def row_label(self, i: int) -> str:
         """Satellite of row ``i`` (for the innovation log)."""
         return str(self.arrays["sat"][i])
@@ -279,6 +280,11 @@ class Doppler(RawGnssMeasurement):
     """Doppler range rate ``-lambda D`` of one satellite; see the module docstring."""
 
     name = "doppler"
+
+    def extra_states(self) -> list[ExtraState]:
+        """Only the clock: the range rate does not see the inter-system biases (constant
+        offsets), so a Doppler beside a :class:`Pseudorange` declares no second copy of them."""
+        return [self.clock.extra_state()]
 
     def evaluate(self, i, nav):
         dop = self.arrays["doppler"][i]

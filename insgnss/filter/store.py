@@ -37,8 +37,10 @@ to the last high-rate sample before it.
 
 Innovation log
 --------------
-One record per measurement evaluated (accepted or not): time, type, dof, NIS, threshold,
-accepted, recovered, the innovation and the square roots of the diagonal of ``S``.
+One record per measurement evaluated (accepted or not): time, type, label, dof, NIS,
+threshold, accepted, recovered, the innovation and the square roots of the diagonal of ``S``.
+The label names the row of a model that gives many measurements at one epoch (``row_label``:
+the satellite of a pseudorange or Doppler); it is empty otherwise.
 """
 
 from __future__ import annotations
@@ -138,11 +140,18 @@ class InnovationLog:
 
     def __init__(self, names: list[str]):
         self.names = list(names)
-        self._rows: list = []  # Python path: (time, tid, dof, nis, thr, accepted, recovered, z, S)
+        self.labels = [""]  # label id -> label (0: none)
+        self._label_id = {"": 0}
+        self._rows: list = []  # Python path: (time, tid, dof, nis, thr, accepted, recovered, z, S,
+        #                                      label id)
         self._chunks: list = []  # flushed blocks (dicts of arrays)
 
-    def add(self, time, tid, nis, thr, accepted, recovered, z, S) -> None:
-        self._rows.append((time, tid, z.size, nis, thr, accepted, recovered, z, S))
+    def add(self, time, tid, nis, thr, accepted, recovered, z, S, label: str = "") -> None:
+        lid = self._label_id.get(label)
+        if lid is None:
+            lid = self._label_id[label] = len(self.labels)
+            self.labels.append(label)
+        self._rows.append((time, tid, z.size, nis, thr, accepted, recovered, z, S, lid))
 
     def _flush(self) -> None:
         if not self._rows:
@@ -164,19 +173,23 @@ class InnovationLog:
             "threshold": np.array([r[4] for r in rows], float),
             "accepted": np.array([r[5] for r in rows], bool),
             "recovered": np.array([r[6] for r in rows], bool),
+            "lid": np.array([r[9] for r in rows], np.int64),
             "innov": innov, "innov_std": std})
         self._rows = []
 
     def add_block(self, block: dict) -> None:
-        """Append a block of records from the compiled path (same keys as the flushed ones)."""
+        """Append a block of records from the compiled path (the keys of the flushed ones;
+        without ``lid`` the records have no label)."""
         self._flush()
         if block["time"].size:
+            if "lid" not in block:
+                block = dict(block, lid=np.zeros(block["time"].size, np.int64))
             self._chunks.append(block)
 
     def columns(self) -> dict:
         """All records as arrays (``innov`` / ``innov_std`` padded with NaN)."""
         self._flush()
-        keys = ("time", "tid", "dof", "nis", "threshold", "accepted", "recovered")
+        keys = ("time", "tid", "dof", "nis", "threshold", "accepted", "recovered", "lid")
         if not self._chunks:
             out = {k: np.empty(0) for k in keys}
             out["innov"] = out["innov_std"] = np.empty((0, 0))
@@ -198,13 +211,15 @@ class InnovationLog:
 
 def innovation_tables(log: InnovationLog, c: dict | None = None
                       ) -> tuple[pd.DataFrame, pd.DataFrame]:
-    """Innovation table (``time type dof nis threshold accepted recovered innov_k
+    """Innovation table (``time type label dof nis threshold accepted recovered innov_k
     innov_std_k``) and its rejected rows (``c``: :meth:`InnovationLog.columns`, if at hand)."""
     c = log.columns() if c is None else c
     m = c["innov"].shape[1]
     names = np.array(log.names + [""], dtype=object)
+    labels = np.array(log.labels, dtype=object)
     cols = {"time": c["time"], "type": names[c["tid"].astype(np.int64)] if c["tid"].size
             else np.empty(0, object),
+            "label": labels[c["lid"].astype(np.int64)] if c["lid"].size else np.empty(0, object),
             "dof": c["dof"].astype(np.int64), "nis": c["nis"], "threshold": c["threshold"],
             "accepted": c["accepted"].astype(bool), "recovered": c["recovered"].astype(bool)}
     for k in range(m):
