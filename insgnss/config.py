@@ -340,9 +340,18 @@ STANDARD = When("process.preset = 'standard' (the foot preset reads [foot], "
                 "initialization.lat_deg/lon_deg/height, filter.coning and the inputs only)",
                 lambda s, sim: s["process"]["preset"] == "standard",
                 lambda s: f"process.preset = {s['process']['preset']!r}")
-HAS_GNSS = When("the job has GNSS data (inputs.gnss.path, or a simulated [gnss] table)",
+HAS_GNSS = When("the job has GNSS data (inputs.gnss.path, inputs.gnss_raw.path, or a "
+                "simulated [gnss] table)",
                 lambda s, sim: s["inputs"]["gnss"]["path"] is not None
+                or s["inputs"]["gnss_raw"]["path"] is not None
                 or (sim is not None and "gnss" in sim))
+TIGHT = _is("aiding.gnss", "tight")
+LOOSE = _is("aiding.gnss", "loose")
+ANTENNA = When("inputs.gnss.path or inputs.gnss_raw.path is given",
+               lambda s, sim: s["inputs"]["gnss"]["path"] is not None
+               or s["inputs"]["gnss_raw"]["path"] is not None)
+RAW_GNSS = When("inputs.gnss_raw.path is given",
+                lambda s, sim: s["inputs"]["gnss_raw"]["path"] is not None)
 CSV, RTKLIBEXPLORER = _is("inputs.imu.format", "csv"), _is("inputs.imu.format", "rtklibexplorer")
 CSV_OR_RTKLIBEXPLORER = _is("inputs.imu.format", "csv", "rtklibexplorer")
 STATIC = _is("initialization.method", "static")
@@ -441,6 +450,19 @@ SCHEMA: dict[str, Any] = {
             "duplicates": _spec(str, "drop", "repeated epochs: drop with a warning (first kept) "
                                 "or stop", choices=["drop", "error"]),
         },
+        "gnss_raw": {
+            "format": _spec(str, "ubx", "raw receiver observations: ubx (u-blox RXM-RAWX + "
+                            "RXM-SFRBX stream) or rinex (RINEX 3 observation file with "
+                            "nav_path); docs/tight.md", choices=["ubx", "rinex"]),
+            "path": _spec(str, None, "raw GNSS file (without inputs.gnss.path its single-point "
+                          "solution is the GNSS table of the job)", check=NONEMPTY),
+            "nav_path": _spec(str, None, "RINEX 3 navigation file", check=NONEMPTY,
+                              when=_is("inputs.gnss_raw.format", "rinex")),
+            "elevation_mask_deg": _spec(_NUM, 10.0, "satellites below are not used [deg]",
+                                        check=_number(0.0, 90.0, hi_open=True), when=RAW_GNSS),
+            "cn0_mask": _spec(_NUM, 25.0, "signals below this C/N0 are not used [dB-Hz]",
+                              check=_number(0.0, 60.0), when=RAW_GNSS),
+        },
         "odometer": {
             "format": _spec(str, "native", "native (time, speed [m/s] or distance [m]) or csv "
                             "(declared unit)", choices=["native", "csv"]),
@@ -513,6 +535,12 @@ SCHEMA: dict[str, Any] = {
                                   check=_vector(3, _number(0.0, 180.0, lo_open=True))),
     },
     "aiding": {
+        "gnss": _spec(str, "loose", "GNSS coupling: loose (position/velocity fixes of "
+                      "inputs.gnss) or tight (a pseudorange and a Doppler update per "
+                      "satellite from inputs.gnss_raw, receiver clock states; docs/tight.md)",
+                      choices=["loose", "tight"], when=HAS_GNSS),
+        "doppler": _spec(bool, True, "tight coupling: Doppler range-rate updates beside the "
+                         "pseudoranges", when=TIGHT),
         "gnss_position": _spec(bool, True, "GNSS position updates"),
         "gnss_velocity": _spec(bool, False, "GNSS velocity updates"),
         "gnss_position_std": _spec(_NUM, None, "override per-epoch std [m]", check=POSITIVE,
@@ -569,6 +597,9 @@ SCHEMA: dict[str, Any] = {
                              choices=["first_gnss", "absolute"],
                              when=When("outages.windows is given",
                                        lambda s, sim: bool(s["outages"]["windows"]))),
+        "keep_satellites": _spec(int, 0, "tight coupling: inside the windows keep the N "
+                                 "highest satellites of each epoch instead of none (partial "
+                                 "outages)", check=_integer(0), when=TIGHT),
         "periodic": {
             "start": _spec(_NUM, None, "first outage start after the first GNSS epoch [s]",
                            check=NONNEGATIVE),
@@ -712,13 +743,17 @@ def _finish_schema() -> None:
         if parts[0] == "inputs":
             if parts[1] != "imu" or parts[2] in reader_keys:
                 extra.append(RECORDED)  # a simulated job reads none of these
-            if parts[1] != "imu" and parts[2] != "path":
+            if key == "inputs.gnss.lever_arm":
+                extra.append(ANTENNA)  # the antenna of either GNSS input
+            elif parts[1] != "imu" and parts[2] != "path":
                 extra.append(_has(f"inputs.{parts[1]}.path"))
         if (parts[0] in ("aiding", "filter") and key != "filter.coning") or \
                 (parts[0] == "initialization" and spec["when"][:1] != (GIVEN_POSITION,)):
             extra.append(STANDARD)
         if parts[:2] == ["filter", "riss"]:
             extra.append(_is("filter.process_model", "riss"))
+        if parts[0] == "aiding" and (parts[1].startswith("gnss_") or parts[1] == "q_scale"):
+            extra.append(LOOSE)  # the fixes of inputs.gnss; tight coupling reads none
         spec["when"] = tuple(extra) + spec["when"]
 
 

@@ -1,6 +1,8 @@
 """Aiding measurements of a job (``[aiding]``, docs/jobs.md): the measurement models the filter
 engine applies - GNSS position and velocity (outage windows withheld, quality flags weighted by
-``q_scale``), ZUPT and ZARU at the detected or declared still times (speed gated), NHC, CUPT at
+``q_scale``) or, with ``aiding.gnss = "tight"``, per-satellite pseudoranges and Dopplers (outage
+windows withheld or thinned to the highest satellites; docs/tight.md), ZUPT and ZARU at the
+detected or declared still times (speed gated), NHC, CUPT at
 control points, odometer speed.
 
 The models themselves (``z, H, R``) are in :mod:`insgnss.filter.measurements`; this module
@@ -282,6 +284,83 @@ def _gnss_sources(job: Job, gnss: pd.DataFrame, lever_arm, windows, imu: pd.Data
     return out
 
 
+def reception_times(prepared: pd.DataFrame, spp: pd.DataFrame) -> pd.DataFrame:
+    """``prepared`` re-indexed from the receiver's time tags to GPS time of reception, ``tag -
+    b / c`` with the receiver clock ``b`` of the single-point solution (its ``receiver_time``
+    column against its GPS-time index; interpolated between, held beyond its epochs): the
+    tags are off by the clock (1.5 ms on the walk), which the IMU's GPS time stamps are not."""
+    tag, t_gps = spp["receiver_time"].to_numpy(float), spp.index.to_numpy(float)
+    ok = np.isfinite(tag) & np.isfinite(t_gps)
+    t = prepared.index.to_numpy(float)
+    if not ok.any():
+        return prepared
+    off = np.interp(t, tag[ok], (tag - t_gps)[ok])
+    out = prepared.set_axis(pd.Index(t - off, name=prepared.index.name), axis=0)
+    out.attrs.update(prepared.attrs)
+    return out
+
+
+def _raw_sources(job: Job, inputs: Inputs, windows, imu: pd.DataFrame) -> list[Source]:
+    """Tightly coupled GNSS (``aiding.gnss = "tight"``): one pseudorange and one Doppler
+    source over the satellite rows of the raw data (:mod:`insgnss.filter.gnss_raw`): rows with
+    a usable signal and ephemeris -> inside the IMU span after the initial epoch -> outside
+    the outage windows, or among the ``outages.keep_satellites`` highest satellites inside."""
+    from ..filter.gnss_raw import Doppler, Pseudorange, ReceiverClock
+    from ..gnss import prepare_observations
+    from ..gnss.observations import keep_highest_satellites
+    from .inputs import gnss_model_config
+
+    raw, sol = inputs.gnss_raw, inputs.spp
+    file = job.resolve(job["inputs"]["gnss_raw"]["path"])
+    file = None if file is None else str(file)
+    if raw is None:
+        raise ConfigError('aiding.gnss = "tight" needs raw observations (inputs.gnss_raw.path)',
+                          file=job.path, column="aiding.gnss")
+    cfg = gnss_model_config(job)
+    prep = prepare_observations(raw.observations, raw.ephemeris, cfg)
+    steps = [Step(len(prep), "satellite measurements with a usable signal and ephemeris",
+                  "no observation has a signal, C/N0 and healthy ephemeris the model can use "
+                  "(inputs.gnss_raw.cn0_mask; the stream's navigation data)",
+                  "inputs.gnss_raw.cn0_mask")]
+    if len(prep) and sol is not None and len(sol):
+        prep = reception_times(prep, sol)
+    t = prep.index.to_numpy(float)
+    prep = prep[(t > float(imu.index[0]) + 1e-6) & (t <= float(imu.index[-1]))]
+    steps.append(Step(len(prep), "inside the IMU time span after the initial epoch",
+                      f"every one lies outside the IMU time span {float(imu.index[0]):.3f} .. "
+                      f"{float(imu.index[-1]):.3f} s or at the initial epoch", "time"))
+    n_keep = int(job["outages"]["keep_satellites"])
+    if len(prep) and windows:
+        ranked = outside_windows(sol, windows)  # elevations from positions the run may use
+        prep = keep_highest_satellites(prep, windows, n_keep, ranked)
+    steps.append(Step(len(prep), "outside the outage windows" + (
+        f" or among the {n_keep} highest satellites inside" if n_keep else ""),
+        f"every remaining one lies inside an outage window ({describe_windows(windows)})",
+        "outages"))
+    if not len(prep):
+        return [Source("aiding.gnss", "pseudorange", "pseudoranges", steps, None, file, 2)]
+    clock = ReceiverClock.from_spp(sol, float(imu.index[0]))
+    isb = {s: float(np.nanmedian(sol[f"clock_bias_{s}"] - sol[f"clock_bias_{clock_ref(sol)}"]))
+           for s in pd.unique(prep["system"]) if f"clock_bias_{s}" in sol.columns}
+    kw = dict(ionosphere=raw.ionosphere, lever_arm=inputs.lever_arm, config=cfg, clock=clock,
+              reference_system=clock_ref(sol))
+    pr = Pseudorange(prep, isb_initial=isb, **kw)
+    out = [Source("aiding.gnss", pr.name, "pseudoranges", steps, pr, file, 2)]
+    if job["aiding"]["doppler"]:
+        dp = Doppler(prep, **kw)
+        n_dop = int(np.isfinite(prep["doppler"].to_numpy(float)).sum())
+        out.append(Source("aiding.doppler", dp.name, "Doppler range rates", steps + [
+            Step(n_dop, "with a Doppler", "no remaining row has a Doppler measurement",
+                 "doppler", "without a Doppler")], dp, file, 2))
+    return out
+
+
+def clock_ref(spp: pd.DataFrame) -> str:
+    """Reference system of the receiver clock: GPS when the solution has its clock."""
+    systems = [c[len("clock_bias_"):] for c in spp.columns if c.startswith("clock_bias_")]
+    return "G" if "G" in systems or not systems else systems[0]
+
+
 def _in_span(n_all: int, n_in: int, what: str, t0: float, t1: float, column: str) -> list[Step]:
     return [Step(n_all, what),
             Step(n_in, "inside the IMU time span",
@@ -295,7 +374,9 @@ def build_aiding(job: Job, inputs: Inputs, windows, imu: pd.DataFrame) -> Aiding
     src = Aiding()
     t = imu.index.to_numpy(float)
     t0, t1 = float(t[0]), float(t[-1])
-    if inputs.gnss is not None:
+    if a["gnss"] == "tight":
+        src.sources += _raw_sources(job, inputs, windows, imu)
+    elif inputs.gnss is not None:
         src.sources += _gnss_sources(job, inputs.gnss, inputs.lever_arm, windows, imu)
     if a["zupt"] or a["zaru"]:
         ts = stillness_times(job, imu)
@@ -450,5 +531,6 @@ def applied_check(job: Job, aiding: Aiding, counts: dict, innovations: pd.DataFr
 
 __all__ = ["MOST_REJECTED", "Aiding", "Source", "SpeedGated", "SpeedGatedZaru", "SpeedGatedZupt",
            "Step",
-           "applied_check", "build_aiding", "build_measurements", "check_aiding",
+           "applied_check", "build_aiding", "build_measurements", "check_aiding", "clock_ref",
+           "reception_times",
            "measurement_counts", "stillness_times"]

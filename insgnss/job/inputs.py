@@ -25,6 +25,10 @@ class Inputs:
 
     imu: pd.DataFrame
     gnss: pd.DataFrame | None = None
+    #: raw receiver observations (``[inputs.gnss_raw]``, :class:`insgnss.gnss.RawGnss`)
+    gnss_raw: object | None = None
+    #: their single-point solution (:func:`insgnss.gnss.spp`; clock, positions)
+    spp: pd.DataFrame | None = None
     odometer: pd.DataFrame | None = None
     reference: pd.DataFrame | None = None
     reference_point: str = "antenna"
@@ -130,6 +134,40 @@ def read_gnss(job: Job) -> pd.DataFrame | None:
     return g
 
 
+def gnss_model_config(job: Job):
+    """Masks of the raw GNSS measurements (``[inputs.gnss_raw]``) as a
+    :class:`insgnss.gnss.GnssModelConfig`."""
+    from ..gnss import GnssModelConfig
+
+    spec = job["inputs"]["gnss_raw"]
+    return GnssModelConfig(elevation_mask=float(np.radians(spec["elevation_mask_deg"])),
+                           cn0_mask=float(spec["cn0_mask"]))
+
+
+def read_gnss_raw(job: Job):
+    """The raw receiver data of ``[inputs.gnss_raw]`` (:class:`insgnss.gnss.RawGnss`) and its
+    single-point solution (a GNSS table, :func:`insgnss.gnss.spp_gnss_table`); ``(None,
+    None)`` without a file."""
+    spec = job["inputs"]["gnss_raw"]
+    path = job.resolve(spec["path"])
+    if path is None:
+        return None, None
+    from ..gnss import RawGnss, SppConfig, load_ubx, spp_gnss_table
+
+    if spec["format"] == "rinex":
+        nav = job.resolve(spec["nav_path"])
+        if nav is None:
+            raise ConfigError("RINEX observations need a navigation file", file=job.path,
+                              column="inputs.gnss_raw.nav_path")
+        raw = RawGnss.from_rinex(path, nav)
+    else:
+        raw = load_ubx(path)
+    sol = spp_gnss_table(raw, SppConfig(model=gnss_model_config(job)))
+    sol.attrs.setdefault("source", str(path))
+    sol.attrs.setdefault("time_base", "gps")
+    return raw, sol
+
+
 def read_reference(job: Job) -> pd.DataFrame | None:
     """The reference trajectory of ``[inputs.reference]`` (None without a file)."""
     spec = job["inputs"]["reference"]
@@ -167,6 +205,9 @@ def load_inputs(job: Job, seed: int | None = None) -> Inputs:
                       imu_model=imu_model(job, grade(sim_grade) if sim_grade else None))
     imu = read_imu(job)
     gnss = read_gnss(job)
+    raw, sol = read_gnss_raw(job)
+    if gnss is None:
+        gnss = sol  # the loosely coupled input (and the initialization's) from the raw data
     odo = None
     o = job["inputs"]["odometer"]
     if o["path"] is not None:
@@ -185,9 +226,10 @@ def load_inputs(job: Job, seed: int | None = None) -> Inputs:
     ref = read_reference(job)
     check_time_bases({"IMU": imu, "GNSS": gnss, "odometer": odo, "reference": ref,
                       "control points": cp}, job["job"]["time_base"], file=job.path)
-    return Inputs(imu=imu, gnss=gnss, odometer=odo, reference=ref,
+    return Inputs(imu=imu, gnss=gnss, gnss_raw=raw, spp=sol, odometer=odo, reference=ref,
                   reference_point=job["inputs"]["reference"]["point"], control_points=cp,
                   lever_arm=la, imu_model=imu_model(job, None))
 
 
-__all__ = ["Inputs", "imu_model", "load_inputs", "read_gnss", "read_imu", "read_reference"]
+__all__ = ["Inputs", "gnss_model_config", "imu_model", "load_inputs", "read_gnss",
+           "read_gnss_raw", "read_imu", "read_reference"]
