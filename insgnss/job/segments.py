@@ -61,6 +61,7 @@ def segment_job(job: Job, windows, start: float | None, method: str | None) -> J
     s["inputs"]["imu"]["gap_policy"] = "bridge"  # the segment has no long gap left
     s["outages"] = {"windows": [[float(a), float(b)] for a, b in windows],
                     "relative_to": "absolute",
+                    "keep_satellites": job.settings["outages"]["keep_satellites"],
                     "periodic": {"start": None, "length": None, "gap": None,
                                  "stop_before_end": 0.0}}
     return Job(settings=s, path=job.path, simulation=job.simulation)
