@@ -122,3 +122,43 @@ def test_walk_tight_drift_with_three_satellites_below_two_metres(walk_run):
     rel_non = np.sqrt(np.mean(np.sum((err[~out] - bias) ** 2, axis=1)))
     print("end-of-outage drift", drift.round(2), "non-outage RMS about the offset", round(rel_non, 2))
     assert drift.mean() < 2.0 and rel_non < 1.0
+
+
+def test_rinex_raw_input_gives_the_spp_gnss_table(tmp_path):
+    """``[inputs.gnss_raw] format = "rinex"``: RINEX 3 observation + navigation files are read,
+    and their single-point solution is the job's GNSS table (GPS time, positions at the
+    simulated receiver to metres, the clock of the simulation)."""
+    from gnss_helpers import (
+        ALPHA,
+        BETA,
+        CFG,
+        ION,
+        T0,
+        simulate_observations,
+        synthetic_constellation,
+        write_rinex_nav,
+        write_rinex_obs,
+    )
+
+    from insgnss.earth import ecef_to_geodetic, geodetic_to_ecef
+    from insgnss.job.inputs import read_gnss_raw
+
+    eph = synthetic_constellation(T0)
+    r0 = np.array(geodetic_to_ecef(np.radians(40.1), np.radians(-105.15), 1600.0))
+    times = T0 + 10.0 + np.arange(5.0)
+    obs, truth = simulate_observations(eph, times, lambda t: r0, lambda t: -4.6e5 - 70.0 * (t - T0),
+                                       iono=(ALPHA, BETA))
+    write_rinex_obs(obs, tmp_path / "rx.obs", {"G": ("1C",), "E": ("1C",)})
+    write_rinex_nav(eph, ION, tmp_path / "rx.nav")
+    d = _job_dict()
+    d["inputs"]["gnss_raw"] = {"format": "rinex", "path": str(tmp_path / "rx.obs"),
+                               "nav_path": str(tmp_path / "rx.nav"),
+                               "cn0_mask": CFG.cn0_mask}
+    raw, sol = read_gnss_raw(load_job_dict(d, JOB))
+    assert len(raw.observations) == len(obs) and len(sol) == times.size
+    assert sol.attrs["time_base"] == "gps"
+    np.testing.assert_allclose(sol.index.to_numpy(float), times, atol=1e-6)
+    lat, lon, h = ecef_to_geodetic(*r0)
+    assert np.all(np.abs(sol["lat"] - lat) * 6.4e6 < 1.0)
+    assert np.all(np.abs(sol["height"] - h) < 2.0)
+    np.testing.assert_allclose(sol["clock_bias_G"], [s["b"] for s in truth], atol=2.0)
