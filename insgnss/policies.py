@@ -9,7 +9,8 @@ treatment and every run reports what was repaired (``summary.json`` ``"imu"``):
   repeated stamps are dropped with a warning (``inputs.imu.duplicates = "drop"``, the first is
   kept) or are an error (``"error"``);
 - **gaps**: an interval longer than 1.5 nominal sample intervals (``attrs["nominal_dt"]`` from
-  the declared rate, else the median interval) is a gap. Gaps up to ``inputs.imu.max_gap``
+  the declared rate, else the median interval) is a gap, unless it is the clock's recurring
+  time-stamp jitter (:func:`insgnss.validate.gap_threshold`). Gaps up to ``inputs.imu.max_gap``
   seconds are bridged with a warning (the mechanization integrates across them) and recorded.
   Longer gaps follow ``inputs.imu.gap_policy``: ``"error"`` (default) stops with a
   :class:`~insgnss.errors.DataGapError` naming the file and row after the gap, ``"bridge"``

@@ -268,3 +268,23 @@ def test_error_hierarchy():
     w = InsgnssWarning("gap bridged", file="a.csv", row=3, column="time", found="0.5 s")
     assert str(w) == "a.csv, row 3, column 'time': gap bridged, found 0.5 s"
     assert issubclass(InsgnssWarning, UserWarning)
+
+
+def test_timestamp_jitter_is_not_a_gap():
+    """A logger stamping with a millisecond counter (the rtklibexplorer walk: 6, 7, 8 and 9 ms
+    intervals, 9 ms being 1.5 median intervals) has no gap; a lost sample in it still is one."""
+    rng = np.random.default_rng(3)
+    d = rng.choice([6e-3, 7e-3, 8e-3, 9e-3], size=5000, p=[0.68, 0.11, 0.17, 0.04])
+    d[2000] = 18e-3  # one lost sample (two intervals of 9 ms)
+    t = np.concatenate([[0.0], np.cumsum(d)])
+    gaps = find_gaps(t, np.arange(t.size) + 1, float(np.median(d)))
+    assert [g["row"] for g in gaps] == [2002]
+    assert gaps[0]["missing"] == 2  # from the 6.6 ms mean interval, not the 6 ms median
+    # a declared 6 ms rate: the same
+    assert len(find_gaps(t, np.arange(t.size) + 1, 6e-3)) == 1
+    # a clean clock keeps the 1.5-interval rule
+    t2 = np.arange(1000) * 0.01
+    t2[500:] += 0.006
+    assert len(find_gaps(t2, np.arange(t2.size), 0.01)) == 1
+    t2[500:] -= 0.002
+    assert find_gaps(t2, np.arange(t2.size), 0.01) == []
