@@ -39,6 +39,7 @@ from typing import Any
 
 from .columns import DEFAULT_OUTPUT_GROUPS, OUTPUT_GROUPS, output_rate
 from .errors import ConfigError
+from .profiles import DEFAULT_PLATFORM, platforms, profile, profiles_path
 
 _ANY = object()
 _NUM = (int, float)
@@ -387,6 +388,10 @@ SCHEMA: dict[str, Any] = {
                            "two inputs in different bases are an error even when unspecified",
                            choices=["gps", "sow", "unix_gpst", "utc_sod", "run",
                                     "unspecified"]),
+        "platform": _spec(str, DEFAULT_PLATFORM, "platform profile: the defaults that depend on "
+                          "what carries the IMU (insgnss/data/profiles.toml, "
+                          "docs/generalization.md); the job's own keys override it",
+                          choices=list(platforms())),
     },
     "inputs": {
         "imu": {
@@ -410,6 +415,10 @@ SCHEMA: dict[str, Any] = {
             "estimate_time_offset": _spec(bool, False, "estimate a further IMU-GNSS offset from "
                                           "gyro yaw rate vs GNSS course rate (land vehicles)",
                                           when=HAS_GNSS),
+            "time_offset_min_speed": _spec(_NUM, 3.0, "GNSS speed above which the course rate "
+                                           "takes part in the time-offset estimate [m/s]",
+                                           check=POSITIVE,
+                                           when=_on("inputs.imu.estimate_time_offset")),
             "axis_map": _spec(str, None, 'sensor -> body axis map, e.g. "y,x,-z"', when=CSV,
                               check=_via("three signed distinct axes, a proper rotation",
                                          _check_axis_map)),
@@ -444,6 +453,11 @@ SCHEMA: dict[str, Any] = {
             "lever_arm": _spec(list, [0.0, 0.0, 0.0], "IMU -> antenna, body RFU [m]",
                                check=_vector(3)),
             "time_offset": _spec(_NUM, 0.0, "added to the GNSS time [s]"),
+            "estimate_velocity_lag": _spec(bool, True, "estimate how far the velocity time tags "
+                                           "lag the positions (receivers that difference "
+                                           "positions tag the mean velocity at the interval end)"
+                                           " and move the velocities to their time",
+                                           when=_on("aiding.gnss_velocity")),
             "date": _spec(str, None, "date for NMEA without RMC (YYYY-MM-DD)",
                           check=_via("YYYY-MM-DD", _check_date), when=_is("inputs.gnss.format",
                                                                           "nmea")),
@@ -507,7 +521,8 @@ SCHEMA: dict[str, Any] = {
                         check=_number(-1.2e4, 1e8), when=GIVEN_POSITION),
         "method": _spec(str, "static", "static, gnss_velocity or given",
                         choices=["static", "gnss_velocity", "given"]),
-        "static_duration": _spec(_NUM, 30.0, "static window at the start [s]",
+        "static_duration": _spec(_NUM, None, "static window at the start [s] (default: the "
+                                 "initial still period found in the data)",
                                  check=POSITIVE, when=STATIC, min_imu_intervals=2),
         "static_max_accel_std": _spec(_NUM, 0.5, "stillness limit of the static window "
                                       "(specific-force variation, m/s^2; engine vibration)",
@@ -524,6 +539,12 @@ SCHEMA: dict[str, Any] = {
                            when=_is("initialization.method", "given", "gnss_velocity")),
         "min_speed": _spec(_NUM, 3.0, "speed for GNSS-velocity heading [m/s]", check=POSITIVE,
                            when=_is("initialization.method", "static", "gnss_velocity")),
+        "course_heading_std_deg": _spec(_NUM, 3.0, "heading sigma when the heading comes from "
+                                        "the course over ground (how well the IMU's forward "
+                                        "axis follows the direction of travel) [deg]",
+                                        check=_number(0.0, 180.0, lo_open=True),
+                                        when=_is("initialization.method", "static",
+                                                 "gnss_velocity")),
         "start_time": _spec(_NUM, None, "start processing here [s, job time base]; inside the "
                             "IMU data"),
         "position_std": _spec(_NUM, None, "initial position sigma [m] (default: GNSS)",
@@ -547,6 +568,9 @@ SCHEMA: dict[str, Any] = {
                                    when=_on("aiding.gnss_position")),
         "gnss_velocity_std": _spec(_NUM, None, "override per-epoch std [m/s]", check=POSITIVE,
                                    when=_on("aiding.gnss_velocity")),
+        "gnss_velocity_std_scale": _spec(_NUM, 1.0, "multiplies the file's velocity std (after "
+                                         "q_scale)", check=POSITIVE,
+                                         when=_on("aiding.gnss_velocity")),
         "gnss_std_scale": _spec(_NUM, 1.0, "multiplies the file's std", check=POSITIVE,
                                 when=_on("aiding.gnss_position")),
         "gnss_min_std": _spec(_NUM, 0.005, "floor of the position std [m] (0: no floor)",
@@ -651,6 +675,15 @@ SCHEMA: dict[str, Any] = {
         "imu_grade": _spec(str, None, "IMU error model for the filter (default: the "
                            "scenario's [imu] for simulated jobs, else tactical)",
                            check=_via(_grade_names, _check_grade)),
+        "autotune": _spec(bool, False, "estimate the noise parameters that matter most from the "
+                          "data by maximum likelihood (insgnss.autotune, docs/filter.md)",
+                          when=_is("filter.process_model", "strapdown")),
+        "autotune_sweeps": _spec(int, 2, "coordinate sweeps of the self-tuning",
+                                 check=_integer(1), when=_on("filter.autotune")),
+        "autotune_parameters": _spec(list, None, "parameters the self-tuning estimates "
+                                     "(default: every one the job's aiding can inform; names "
+                                     "in docs/filter.md)", check=NONEMPTY,
+                                     when=_on("filter.autotune")),
         "riss": {
             "odometer_scale_std": _spec(_NUM, 0.02, "RISS: initial odometer scale-factor sigma",
                                         check=NONNEGATIVE),
@@ -800,7 +833,8 @@ def _is_table_spec(spec) -> bool:
     return isinstance(spec, dict) and "type" not in spec
 
 
-def _validate(table: dict, schema: dict, prefix: str, file, given: set) -> dict:
+def _validate(table: dict, schema: dict, prefix: str, file, given: set,
+              defaults: bool = True) -> dict:
     out: dict[str, Any] = {}
     for key, value in table.items():
         dotted = f"{prefix}{key}"
@@ -815,10 +849,12 @@ def _validate(table: dict, schema: dict, prefix: str, file, given: set) -> dict:
             if not isinstance(value, dict):
                 raise ConfigError("wrong type", file=file, column=dotted, expected="table",
                                   found=type(value).__name__)
-            out[key] = _validate(value, spec, dotted + ".", file, given)
+            out[key] = _validate(value, spec, dotted + ".", file, given, defaults)
         else:
             out[key] = _check_value(value, spec, dotted, file)
             given.add(dotted)
+    if not defaults:
+        return out
     for key, spec in schema.items():  # defaults
         if key in out:
             continue
@@ -890,15 +926,59 @@ def _check_use(settings: dict, given: set, simulation: dict, file) -> None:
             need("inputs.odometer.path", f"{what} needs odometer data")
 
 
+def _overlay(base: dict, top: dict, schema: dict) -> dict:
+    """``top`` over ``base`` key by key, descending into the schema's tables (a table-valued
+    key such as ``aiding.q_scale`` is one value: ``top``'s replaces ``base``'s)."""
+    out = dict(base)
+    for key, value in top.items():
+        spec = schema.get(key)
+        if spec is not None and _is_table_spec(spec) and isinstance(value, dict) \
+                and isinstance(out.get(key), dict):
+            out[key] = _overlay(out[key], value, spec)
+        else:
+            out[key] = value
+    return out
+
+
+def _leaves(table: dict, schema: dict, prefix: str = "") -> dict:
+    """``{"aiding.nhc": True, ...}``: the keys a (partial) job table sets, dotted."""
+    out = {}
+    for key, value in table.items():
+        spec = schema.get(key)
+        if spec is not None and _is_table_spec(spec) and isinstance(value, dict):
+            out.update(_leaves(value, spec, f"{prefix}{key}."))
+        else:
+            out[f"{prefix}{key}"] = value
+    return out
+
+
+def platform_profile(name: str) -> dict:
+    """The job tables of the platform profile ``name``, checked against the schema (an unknown
+    key or a wrong type names the profiles file and the key)."""
+    return _validate(profile(name), SCHEMA, "", str(profiles_path()), set(), defaults=False)
+
+
 @dataclass
 class Job:
-    """A validated job: the settings (dict of tables with defaults filled in), the file it came
-    from, any simulation tables it carries and the keys the file gave explicitly."""
+    """A validated job: the settings (dict of tables with the defaults of the platform profile
+    and of the schema filled in: what runs), the file it came from, any simulation tables it
+    carries and the keys the file gave explicitly (``given``).
+
+    ``platform`` is the profile (``[job] platform``); ``from_profile`` the profile's values the
+    job did not override (``{dotted key: value}``); :attr:`explicit` the job file's own values.
+    """
 
     settings: dict
     path: Path | None = None
     simulation: dict = field(default_factory=dict)
     given: frozenset = frozenset()
+    platform: str = DEFAULT_PLATFORM
+    from_profile: dict = field(default_factory=dict)
+
+    @property
+    def explicit(self) -> dict:
+        """The job file's own values, ``{dotted key: value}``."""
+        return {k: _get(self.settings, k) for k in sorted(self.given)}
 
     def __getitem__(self, table: str) -> dict:
         return self.settings[table]
@@ -951,7 +1031,8 @@ class Job:
 
 
 def load_job_dict(data: dict, path: str | Path | None = None, *, complete: bool = True) -> Job:
-    """Validate a job given as a dict (as parsed from TOML).
+    """Validate a job given as a dict (as parsed from TOML) and resolve it: schema defaults,
+    overlaid by the platform profile (``[job] platform``), overlaid by the job's own keys.
 
     ``complete=False`` checks names, types and values only (shared base settings that jobs
     complete, e.g. ``insgnss batch --settings``), not whether the run reads every key.
@@ -962,9 +1043,15 @@ def load_job_dict(data: dict, path: str | Path | None = None, *, complete: bool 
     sim = {k: v for k, v in data.items() if k in SIMULATION_TABLES}
     rest = {k: v for k, v in data.items() if k not in SIMULATION_TABLES}
     given: set = set()
-    settings = _validate(rest, SCHEMA, "", file, given)
+    own = _validate(rest, SCHEMA, "", file, given, defaults=False)  # the job's keys, checked
+    # resolution: schema default < platform profile < the job's own keys
+    platform = own.get("job", {}).get("platform", DEFAULT_PLATFORM)
+    prof = platform_profile(platform)
+    settings = _validate(_overlay(prof, own, SCHEMA), SCHEMA, "", file, set())
+    from_profile = {k: v for k, v in _leaves(prof, SCHEMA).items() if k not in given}
     job = Job(settings=settings, path=None if path is None else Path(path).resolve(),
-              simulation=sim, given=frozenset(given))
+              simulation=sim, given=frozenset(given), platform=platform,
+              from_profile=from_profile)
     if complete:
         _check_use(settings, given, sim, file)
         rate = sim.get("scenario", {}).get("imu_rate") if isinstance(sim.get("scenario"),

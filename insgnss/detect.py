@@ -88,6 +88,24 @@ Post-processing of the raw decisions (all in compiled per-sample loops):
 
 The result is a :class:`Stillness` holding the boolean series, the statistic and the
 threshold used, all as pandas Series indexed by time.
+
+Static windows found in the data (:func:`find_static_windows`)
+--------------------------------------------------------------
+Initialization and noise measurement need the periods when the platform does not move, found
+from the data instead of assumed. Two levels, both from the ``amv`` statistic of the specific
+force and of the angular rate (standard deviation of the vector over a ``window``):
+
+- **stationary**: below the platform's stillness limits (``max_accel_std``, ``max_rate_std``:
+  a parked car vibrates with its engine, a hand trembles), and outside excluded intervals
+  (bridged IMU gaps, GNSS showing motion);
+- **truly still**: stationary and within ``floor_factor`` times the recording's *noise
+  floor*, the 2 % quantile of the statistic over the whole recording (the quietest the sensor
+  ever is: its own noise, or the vibration of a parked vehicle). A hand-held device standing
+  "still" shows 0.2-0.6 m/s^2 of hand motion against a 0.01 m/s^2 sensor floor: stationary, not
+  still; its sensor noise cannot be measured there.
+
+Runs shorter than ``min_duration`` are dropped and every run is shortened by ``margin`` at
+both ends (the centred window overhangs the motion by half its length).
 """
 
 from __future__ import annotations
@@ -817,3 +835,98 @@ def detect_stillness(imu: pd.DataFrame, config: DetectorConfig | None = None, **
     idx = pd.Index(t, name="time")
     return Stillness(pd.Series(still, idx, name="still"), pd.Series(stat, idx, name="statistic"),
                      pd.Series(thr, idx, name="threshold"), cfg.method)
+
+
+# --- static windows found in the data ----------------------------------------------------------
+#: quantile of the windowed statistic that is the recording's noise floor
+FLOOR_QUANTILE = 0.02
+
+
+@dataclass
+class StaticWindows:
+    """Stationary and truly still periods of a recording (:func:`find_static_windows`).
+
+    Attributes
+    ----------
+    stationary, still : list of (t_start, t_end)
+        Periods below the platform's stillness limits, and the truly still ones among them.
+    accel_floor, rate_floor : float
+        Noise floor of the specific-force [m/s^2] and angular-rate [rad/s] statistics.
+    accel_std, rate_std : pandas Series
+        The windowed statistics (standard deviation of the vector over the window).
+    """
+
+    stationary: list
+    still: list
+    accel_floor: float
+    rate_floor: float
+    accel_std: pd.Series
+    rate_std: pd.Series
+
+    def motion(self, t0: float, t1: float) -> tuple[float, float]:
+        """Median specific-force and angular-rate variation [m/s^2, rad/s] over [t0, t1]."""
+        a = self.accel_std.loc[t0:t1].to_numpy()
+        w = self.rate_std.loc[t0:t1].to_numpy()
+        return (float(np.median(a)) if a.size else np.nan,
+                float(np.median(w)) if w.size else np.nan)
+
+    def initial(self, t0: float, tolerance: float) -> tuple[tuple | None, tuple | None]:
+        """The stationary and the truly still period that start within ``tolerance`` seconds of
+        ``t0`` (None where there is none)."""
+        def first(runs):
+            return next(((a, b) for a, b in runs if a <= t0 + tolerance and b > t0), None)
+
+        return first(self.stationary), first(self.still)
+
+
+def _runs(flags: np.ndarray, t: np.ndarray) -> list[tuple[float, float]]:
+    d = np.diff(np.concatenate([[0], flags.astype(np.int8), [0]]))
+    starts, ends = np.flatnonzero(d == 1), np.flatnonzero(d == -1) - 1
+    return [(float(t[a]), float(t[b])) for a, b in zip(starts, ends, strict=True)]
+
+
+def find_static_windows(imu: pd.DataFrame, *, max_accel_std: float, max_rate_std: float,
+                        window: float = 0.5, floor_factor: float = 5.0,
+                        min_duration: float = 1.0, margin: float = 0.25,
+                        exclude=()) -> StaticWindows:
+    """Stationary and truly still periods of an IMU recording (module docstring, "Static
+    windows found in the data").
+
+    Parameters
+    ----------
+    imu : DataFrame
+        IMU table (rates or increments) indexed by time [s].
+    max_accel_std, max_rate_std : float
+        Stillness limits of the platform [m/s^2], [rad/s] (vibration, tremor).
+    window : float
+        Length of the statistic's window [s].
+    floor_factor : float
+        A truly still sample is within this factor of the noise floor.
+    min_duration, margin : float
+        Shortest period kept; shortening at both ends [s].
+    exclude : sequence of (t0, t1)
+        Intervals that are never static (bridged gaps, GNSS showing motion).
+    """
+    t, gyro, acc = imu_rates(imu)
+    if t.size < 3:
+        empty = pd.Series(np.zeros(t.size), pd.Index(t, name="time"))
+        return StaticWindows([], [], np.nan, np.nan, empty, empty)
+    dt = float(np.median(np.diff(t)))
+    w = sample_count(window, dt)
+    sa = amv_statistic(np.require(acc, float, ["C", "W"]), w)
+    sw = amv_statistic(np.require(gyro, float, ["C", "W"]), w)
+    fa, fw = float(np.quantile(sa, FLOOR_QUANTILE)), float(np.quantile(sw, FLOOR_QUANTILE))
+    ok = np.ones(t.size, bool)
+    half = 0.5 * window  # a sample whose window reaches into an excluded interval
+    for a, b in exclude:
+        ok &= ~((t >= a - half) & (t <= b + half))
+    stationary = ok & (sa <= max_accel_std) & (sw <= max_rate_std)
+    still = stationary & (sa <= floor_factor * fa) & (sw <= floor_factor * fw)
+    n_min, n_margin = sample_count(min_duration, dt), sample_count(margin, dt)
+    runs = []
+    for flags in (stationary, still):
+        flags = shrink_runs(drop_short_runs(flags, n_min), n_margin)
+        runs.append(_runs(drop_short_runs(flags, max(n_min - 2 * n_margin, 1)), t))
+    idx = pd.Index(t, name="time")
+    return StaticWindows(runs[0], runs[1], fa, fw, pd.Series(sa, idx, name="accel_std"),
+                         pd.Series(sw, idx, name="rate_std"))

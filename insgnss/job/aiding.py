@@ -272,8 +272,13 @@ def _gnss_sources(job: Job, gnss: pd.DataFrame, lever_arm, windows, imu: pd.Data
             raise InputFormatError("GNSS velocity aiding requested but the GNSS data has no "
                                    "velocity", file=file, column="vel_e")
         std = a["gnss_velocity_std"]
-        gv = g.drop(columns=[c for c in GnssVelocity.STD_COLS if c in g.columns]) \
-            if std is not None else g
+        gv = velocity_table(g, windows)
+        if std is not None:
+            gv = gv.drop(columns=[c for c in GnssVelocity.STD_COLS if c in gv.columns])
+        elif a["gnss_velocity_std_scale"] != 1.0:
+            gv = gv.copy()
+            for c in GnssVelocity.STD_COLS:
+                gv[c] = gv[c] * a["gnss_velocity_std_scale"]
         m = GnssVelocity(gv, lever_arm=lever_arm, std_scale=scale if use_q else None,
                          use_q=use_q, **({"std": std} if std is not None else {}))
         st = q_steps + [Step(int(m.valid.sum()), "with a finite velocity and sigma",
@@ -359,6 +364,19 @@ def clock_ref(spp: pd.DataFrame) -> str:
     """Reference system of the receiver clock: GPS when the solution has its clock."""
     systems = [c[len("clock_bias_"):] for c in spp.columns if c.startswith("clock_bias_")]
     return "G" if "G" in systems or not systems else systems[0]
+
+
+def velocity_table(gnss: pd.DataFrame, windows) -> pd.DataFrame:
+    """The GNSS velocities at their own time: tags moved back by the lag the preprocessing
+    estimated (``attrs["velocity_lag"]``, :func:`insgnss.preprocess.estimate_velocity_lag`).
+    A velocity whose moved time falls inside an outage window is withheld too: it averages
+    over an interval that reaches into the window."""
+    lag = float(gnss.attrs.get("velocity_lag") or 0.0)
+    if not lag:
+        return gnss
+    out = gnss.set_axis(gnss.index - lag, axis=0)
+    out.attrs = dict(gnss.attrs)
+    return outside_windows(out, windows)
 
 
 def _in_span(n_all: int, n_in: int, what: str, t0: float, t1: float, column: str) -> list[Step]:

@@ -1,7 +1,7 @@
 """Initialization of a job (``[initialization] method``): the filter's initial nominal state
 (:class:`~insgnss.mechanization.strapdown.NavState`) and its sigmas.
 
-- ``static``: levelling over the first ``static_duration`` seconds; heading by gyrocompassing
+- ``static``: levelling over the initial static window; heading by gyrocompassing
   when the IMU grade allows it, else the given ``heading_deg``, else from GNSS: the course over
   ground at the first GNSS epoch faster than ``min_speed`` minus the heading change the gyros
   measured from the start to that epoch (a free-inertial run with the levelled attitude);
@@ -10,6 +10,15 @@
   accelerometers averaged over 1 s with the vehicle's acceleration over that second (GNSS
   velocity difference) removed (:func:`insgnss.align.level_moving`), or given;
 - ``given``: roll, pitch, heading given; position from the first GNSS epoch.
+
+The static window is found in the data (:func:`insgnss.detect.find_static_windows`, with the
+stillness limits ``static_max_accel_std`` / ``static_max_rate_std_deg`` of the platform
+profile): the truly still period at the start when it lasts at least
+:data:`MIN_STATIC` seconds, else the stationary one (with a warning: levelling over a moving
+hand averages its tilt); GNSS epochs showing motion (faster than :data:`STATIC_GNSS_SPEED`)
+end it. ``static_duration`` fixes it instead, with a warning when that window is not still.
+The IMU noise is measured only in a truly still window (:attr:`Initialization.noise_window`,
+``filter.noise_from_static``).
 
 GNSS inside the job's outage windows is withheld here as in the aiding
 (:func:`~insgnss.job.windows.outside_windows`): an initialization never uses an epoch the run
@@ -32,10 +41,12 @@ import pandas as pd
 from ..align import can_gyrocompass, coarse_align, gyrocompass, level_moving
 from ..attitude import euler_to_dcm
 from ..config import Job
+from ..detect import find_static_windows
 from ..earth import enu_displacement_to_geodetic
 from ..errors import AlignmentError, ConfigError
 from ..imu import ACCEL_COLS, DV_COLS, GYRO_COLS, ImuErrorModel
 from ..mechanization.strapdown import NavState, mechanize
+from ..validate import warn
 from .inputs import Inputs
 from .windows import describe_windows, outage_windows, outside_windows
 
@@ -45,6 +56,11 @@ MAX_INTERPOLATION = 2.0
 #: a GNSS epoch this close [s] to the initial time gives the position directly (the state time
 #: is an IMU sample, within one IMU interval of the epoch)
 NEAR_EPOCH = 0.02
+#: shortest truly still period at the start that serves as the static window [s]
+MIN_STATIC = 1.0
+#: a GNSS antenna faster than this [m/s] is moving: the static window ends before that epoch
+#: (RTK speed noise is a few cm/s, a single-point fix's a few dm/s)
+STATIC_GNSS_SPEED = 0.3
 
 
 @dataclass
@@ -62,6 +78,10 @@ class Initialization:
     vel_std: float = 0.1
     static_end: float | None = None
     levelled: bool = False  # roll/pitch from accelerometer levelling (tilt ~ accel bias)
+    #: truly still window (start, end) [s] where the IMU noise may be measured (None: none)
+    noise_window: tuple | None = None
+    #: how the static window was found (summary.json "initialization" "static_window")
+    static_info: dict | None = None
 
 
 def _mean_specific_force(win: pd.DataFrame) -> np.ndarray:
@@ -143,8 +163,19 @@ def initialize(job: Job, inputs: Inputs, model: ImuErrorModel, windows=None) -> 
     """Initial nominal state of the filter (see the module docstring).
 
     ``windows`` are the outage windows whose GNSS is withheld (default: the job's,
-    :func:`~insgnss.job.windows.outage_windows`).
+    :func:`~insgnss.job.windows.outage_windows`). ``initialization.attitude_std_deg`` and
+    ``velocity_std``, when given, replace the sigmas the method found.
     """
+    init = _initialize(job, inputs, model, windows)
+    ini = job["initialization"]
+    if ini["attitude_std_deg"] is not None:
+        init.att_std = tuple(float(np.radians(v)) for v in ini["attitude_std_deg"])
+    if ini["velocity_std"] is not None:
+        init.vel_std = float(ini["velocity_std"])
+    return init
+
+
+def _initialize(job: Job, inputs: Inputs, model: ImuErrorModel, windows) -> Initialization:
     ini = job["initialization"]
     imu, all_gnss = inputs.imu, inputs.gnss
     if all_gnss is not None and not len(all_gnss):
@@ -222,7 +253,8 @@ def initialize(job: Job, inputs: Inputs, model: ImuErrorModel, windows=None) -> 
         vel = gnss[["vel_e", "vel_n", "vel_u"]].iloc[k].to_numpy(float)
         st = NavState(*position_at(t_imu, C), vel, C, t_imu)
         return Initialization(st, method, "gnss_velocity", pos_std=pos_std, vel_std=0.2,
-                              att_std=(np.radians(2), np.radians(2), np.radians(5)))
+                              att_std=(np.radians(2), np.radians(2),
+                                       np.radians(max(ini["course_heading_std_deg"], 5.0))))
     if method == "given":
         if any(v is None for v in given):
             raise ConfigError("given initialization needs roll_deg, pitch_deg and heading_deg",
@@ -232,7 +264,7 @@ def initialize(job: Job, inputs: Inputs, model: ImuErrorModel, windows=None) -> 
         st = NavState(*position_at(t0, C), np.zeros(3), C, t0)
         return Initialization(st, method, "given", pos_std=pos_std)
     # static
-    win = imu.loc[: t0 + ini["static_duration"]]
+    win, static_info, noise_window = _static_window(job, imu, all_gnss, windows, t0)
     heading = None if given[2] is None else np.radians(given[2])
     lat_guess = float(gnss["lat"].iloc[0]) if gnss is not None and len(gnss) else \
         float(inputs.truth["lat"].iloc[0]) if inputs.truth is not None else float(fixed[0])
@@ -259,7 +291,7 @@ def initialize(job: Job, inputs: Inputs, model: ImuErrorModel, windows=None) -> 
     att_std = (*tilt, res.heading_std if np.isfinite(res.heading_std) else np.radians(5.0))
     if src == "gnss_course":
         hdg = _heading_from_course(imu, gnss, all_gnss, windows, res, ini["min_speed"], w_mean)
-        att_std = (att_std[0], att_std[1], np.radians(3.0))
+        att_std = (att_std[0], att_std[1], np.radians(ini["course_heading_std_deg"]))
     elif src == "gyrocompass":
         hdg = gyrocompass(w_mean, res.roll, res.pitch) if w_mean is not None else res.heading
     C = euler_to_dcm(res.roll, res.pitch, hdg)
@@ -269,7 +301,78 @@ def initialize(job: Job, inputs: Inputs, model: ImuErrorModel, windows=None) -> 
     st = NavState(*position_at(t_begin, C), np.zeros(3), C, t_begin)
     return Initialization(st, method, src, gyro_bias=None, att_std=att_std, pos_std=pos_std,
                           vel_std=0.02, static_end=t_end,
-                          levelled=bool(job["filter"]["levelling_correlation"]))
+                          levelled=bool(job["filter"]["levelling_correlation"]),
+                          noise_window=noise_window, static_info=static_info)
+
+
+def _moving_intervals(gnss: pd.DataFrame | None, windows) -> list[tuple[float, float]]:
+    """Intervals around the usable GNSS epochs faster than :data:`STATIC_GNSS_SPEED` (half an
+    epoch interval either side): the antenna moved, so the platform is not static there."""
+    if gnss is None or not len(gnss) or "vel_e" not in gnss.columns:
+        return []
+    g = outside_windows(gnss, windows)
+    t = g.index.to_numpy(float)
+    sp = np.hypot(g["vel_e"].to_numpy(float), g["vel_n"].to_numpy(float))
+    if t.size < 2:
+        return []
+    half = 0.5 * float(np.median(np.diff(t)))
+    return [(float(x) - half, float(x) + half) for x in t[sp > STATIC_GNSS_SPEED]]
+
+
+def _static_window(job: Job, imu: pd.DataFrame, gnss, windows, t0: float):
+    """The static window of a ``static`` initialization (module docstring): ``(imu window,
+    info for the summary, truly still noise window or None)``."""
+    ini = job["initialization"]
+    bridged = [(g["start"], g["end"]) for g in imu.attrs.get("gaps") or []
+               if g.get("action") == "bridged"]
+    sw = find_static_windows(imu, max_accel_std=ini["static_max_accel_std"],
+                             max_rate_std=np.radians(ini["static_max_rate_std_deg"]),
+                             exclude=bridged + _moving_intervals(gnss, windows))
+    src = imu.attrs.get("source")
+    floors = {"accel_floor": sw.accel_floor, "rate_floor_deg_s": float(np.degrees(sw.rate_floor))}
+    if ini["static_duration"] is not None:
+        t1 = t0 + float(ini["static_duration"])
+        a, w = sw.motion(t0, t1)
+        still = next(((p, q) for p, q in sw.still if p <= t0 + 0.5 and q >= t1 - 0.5), None)
+        info = {"source": "initialization.static_duration", "start": t0, "end": t1,
+                "truly_still": still is not None, "accel_std": a,
+                "rate_std_deg_s": float(np.degrees(w)), **floors}
+        if still is None:
+            warn(f"the static window {t0:.3f} .. {t1:.3f} s (initialization.static_duration) "
+                 f"is not still: specific-force variation {a:.3f} m/s^2 and angular-rate "
+                 f"variation {np.degrees(w):.2f} deg/s (median over 0.5 s windows) against a "
+                 f"noise floor of {sw.accel_floor:.3f} m/s^2 and "
+                 f"{np.degrees(sw.rate_floor):.2f} deg/s; levelling averages that motion and "
+                 "the IMU noise is not measured there", file=src,
+                 column="initialization.static_duration")
+        return imu.loc[:t1], info, (t0, t1) if still is not None else None
+    stationary, still = sw.initial(t0, 0.5)
+    if still is not None and still[1] - still[0] >= MIN_STATIC:
+        a0, a1 = t0, still[1]
+        truly = True
+    elif stationary is not None and stationary[1] - stationary[0] >= MIN_STATIC:
+        a0, a1 = t0, stationary[1]
+        truly = False
+    else:
+        a, w = sw.motion(t0, t0 + 2.0)
+        raise AlignmentError(
+            f"no static window at the start of the IMU data ({t0:.3f} s): the IMU is not still "
+            f"for {MIN_STATIC:g} s (specific-force variation {a:.3f} m/s^2, angular rate "
+            f"{np.degrees(w):.2f} deg/s over the first 2 s; stillness limits "
+            f"{ini['static_max_accel_std']:g} m/s^2 and {ini['static_max_rate_std_deg']:g} "
+            "deg/s), or the GNSS shows motion; start later (initialization.start_time) or use "
+            "method = \"gnss_velocity\"", file=src, column="initialization.method")
+    a, w = sw.motion(a0, a1)
+    info = {"source": "found", "start": a0, "end": a1, "truly_still": truly, "accel_std": a,
+            "rate_std_deg_s": float(np.degrees(w)), **floors}
+    if not truly:
+        warn(f"the IMU is not truly still at the start: the stationary window {a0:.3f} .. "
+             f"{a1:.3f} s shows a specific-force variation of {a:.3f} m/s^2 and an angular-rate "
+             f"variation of {np.degrees(w):.2f} deg/s against a noise floor of "
+             f"{sw.accel_floor:.3f} m/s^2 and {np.degrees(sw.rate_floor):.2f} deg/s (a hand-held "
+             "device?); levelling averages that motion and the IMU noise is not measured there",
+             file=src, column="initialization.static_duration")
+    return imu.loc[a0:a1], info, (a0, a1) if truly else None
 
 
 def _heading_from_course(imu, gnss, all_gnss, windows, res, min_speed, w_mean) -> float:

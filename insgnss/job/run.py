@@ -10,7 +10,7 @@ from pathlib import Path
 
 from ..config import Job, check_job_against_data
 from ..policies import check_imu_table, gap_policy, shift_report
-from ..preprocess import estimate_time_offset, shift_time
+from ..preprocess import estimate_time_offset, estimate_velocity_lag, shift_time
 from .context import RunContext
 from .inputs import Inputs, imu_model, load_inputs
 from .outputs import write_outputs
@@ -24,7 +24,9 @@ def prepare(job: Job, *, progress: bool | None = None, seed: int | None = None,
             inputs: Inputs | None = None) -> RunContext:
     """Read the inputs (unless given) and prepare them for a process: the IMU table policies
     (:func:`insgnss.policies.check_imu_table`), the outage windows and, when asked, the
-    estimated IMU-GNSS time offset. ``inputs.imu`` is replaced by the prepared table."""
+    estimated IMU-GNSS time offset (``inputs.imu.estimate_time_offset``) and GNSS velocity lag
+    (``inputs.gnss.estimate_velocity_lag``, kept in ``inputs.gnss.attrs["velocity_lag"]``).
+    ``inputs.imu`` is replaced by the prepared table."""
     t_start = time.perf_counter()
     inputs = load_inputs(job, seed) if inputs is None else inputs
     t_read = time.perf_counter() - t_start
@@ -37,13 +39,21 @@ def prepare(job: Job, *, progress: bool | None = None, seed: int | None = None,
     windows = outage_windows(job, inputs.gnss)
     preprocessing = {}
     if job["inputs"]["imu"]["estimate_time_offset"] and inputs.gnss is not None:
-        dt, info = estimate_time_offset(inputs.imu, inputs.gnss, windows)
+        dt, info = estimate_time_offset(inputs.imu, inputs.gnss, windows,
+                                        min_speed=job["inputs"]["imu"]["time_offset_min_speed"])
         inputs.imu = shift_time(inputs.imu, dt)
         imu_report = shift_report(imu_report, dt)
         inputs.imu.attrs.update({k: imu_report[k] for k in ("gaps", "segments",
                                                             "dropped_duplicates")})
         preprocessing["imu_time_offset_estimated_s"] = dt
         preprocessing["imu_time_offset_info"] = info
+    g = inputs.gnss
+    if job["inputs"]["gnss"]["estimate_velocity_lag"] and g is not None and "vel_e" in g.columns \
+            and "velocity_lag" not in g.attrs:
+        lag, info = estimate_velocity_lag(g, windows)
+        g.attrs["velocity_lag"] = lag  # the velocities belong to tag - lag (aiding.py)
+        preprocessing["gnss_velocity_lag_s"] = lag
+        preprocessing["gnss_velocity_lag_info"] = info
     show = job["outputs"]["progress"] if progress is None else progress
     return RunContext(job=job, inputs=inputs, model=model, windows=windows,
                       imu_report=imu_report, t_start=t_start, preprocessing=preprocessing,

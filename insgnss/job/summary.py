@@ -24,11 +24,22 @@ def job_name(job: Job) -> str:
 
 def initialization_summary(init: Initialization, method: str | None = None,
                            heading_source: str | None = None) -> dict:
-    """Method, heading source, time and Euler angles [deg] of the initial state."""
+    """Method, heading source, time and Euler angles [deg] of the initial state, its sigmas
+    and (static) how the static window was found (``static_window``)."""
     r, p, h = init.state.euler
-    return {"method": method or init.method, "heading_source": heading_source or
-            init.heading_source, "time": init.state.time, "roll_deg": float(np.degrees(r)),
-            "pitch_deg": float(np.degrees(p)), "heading_deg": float(np.degrees(h))}
+    out = {"method": method or init.method, "heading_source": heading_source or
+           init.heading_source, "time": init.state.time, "roll_deg": float(np.degrees(r)),
+           "pitch_deg": float(np.degrees(p)), "heading_deg": float(np.degrees(h)),
+           "attitude_std_deg": [float(np.degrees(v)) for v in np.broadcast_to(init.att_std, 3)]}
+    if init.static_info is not None:
+        out["static_window"] = dict(init.static_info)
+    return out
+
+
+def platform_summary(job: Job) -> dict:
+    """The platform profile of a job and the values it provided (``summary.json``
+    ``"platform"``): what ran is the job file's keys over these over the schema defaults."""
+    return {"name": job.platform, "from_profile": dict(job.from_profile)}
 
 
 def stopped_at(res) -> float | None:
@@ -69,6 +80,7 @@ def filter_summary(out: JobResult, counts: dict, notes: list[str], model_name: s
         "job": job_name(job), "description": job["job"]["description"],
         "source": out.inputs.source, "seed": out.inputs.seed,
         "process_model": job["filter"]["process_model"],
+        "platform": platform_summary(job),
         **status(out),
         "imu_samples": int(n_imu), "initialization": initialization_summary(out.init),
         "measurements": counts,
@@ -109,4 +121,4 @@ def add_counts(parts: list[dict]) -> dict:
 
 
 __all__ = ["add_counts", "filter_summary", "incomplete_reason", "initialization_summary",
-           "job_name", "measurement_rows", "status", "stopped_at"]
+           "job_name", "measurement_rows", "platform_summary", "status", "stopped_at"]
