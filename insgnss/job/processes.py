@@ -23,7 +23,9 @@ added to :data:`PROCESSES`.
 from __future__ import annotations
 
 import time
+import warnings
 from collections.abc import Callable
+from dataclasses import replace
 
 import numpy as np
 
@@ -33,12 +35,14 @@ from ..filter.engine import FilterConfig, run_filter
 from ..imu import ImuErrorModel, coning_sculling, increments, increments_table
 from ..policies import gap_noise
 from ..preprocess import with_static_noise
+from ..validate import warn
 from .aiding import Aiding, applied_check, build_aiding, check_aiding, measurement_counts
 from .context import RunContext
 from .evaluation import evaluate_result
 from .initialization import Initialization, initialize
 from .result import JobResult, PresetResult
-from .summary import filter_summary, initialization_summary, job_name, status
+from .summary import filter_summary, initialization_summary, job_name, platform_summary, status
+from .tuning import Tuned, apply, autotune
 
 
 def filter_config(job: Job, model: ImuErrorModel, init: Initialization) -> FilterConfig:
@@ -59,8 +63,30 @@ def filter_config(job: Job, model: ImuErrorModel, init: Initialization) -> Filte
         gyro_bias=None if init.gyro_bias is None else tuple(init.gyro_bias))
 
 
+def static_noise_model(ctx: RunContext, init: Initialization, model: ImuErrorModel
+                       ) -> ImuErrorModel:
+    """``filter.noise_from_static``: the IMU model with ARW/VRW raised to the noise measured in
+    the truly still window the initialization found (:attr:`Initialization.noise_window`);
+    without one, the model unchanged and a warning (noise measured on a moving hand would be
+    its motion, not the sensor's noise)."""
+    if not ctx.job["filter"]["noise_from_static"] or init.method != "static":
+        return model
+    if init.noise_window is None:
+        note = ("filter.noise_from_static: no truly still window at the start; the IMU noise "
+                f"model ({model.name}) is used as it is")
+        ctx.preprocessing["static_noise"] = note
+        warn(note, file=ctx.inputs.imu.attrs.get("source"), column="filter.noise_from_static")
+        return model
+    a, b = init.noise_window
+    model = with_static_noise(model, ctx.inputs.imu.loc[a:b])
+    ctx.preprocessing["gyro_arw_deg_sqrt_h"] = float(np.degrees(model.gyro_arw) * 60)
+    ctx.preprocessing["accel_vrw_m_s_sqrt_h"] = float(model.accel_vrw * 60)
+    ctx.preprocessing["static_noise_window"] = [float(a), float(b)]
+    return model
+
+
 def _filter_result(ctx: RunContext, init: Initialization, res, aiding: Aiding,
-                   model: ImuErrorModel, n_imu: int) -> JobResult:
+                   model: ImuErrorModel, n_imu: int, autotune: dict | None = None) -> JobResult:
     """Evaluate a finished filter run, check what it applied of each aiding source and build
     its :class:`JobResult` with the summary."""
     out = evaluate_result(JobResult(ctx.job, ctx.inputs, init, ctx.windows, res, model=model))
@@ -68,27 +94,56 @@ def _filter_result(ctx: RunContext, init: Initialization, res, aiding: Aiding,
     out.failure, notes = applied_check(ctx.job, aiding, counts, res.innovations, res.complete)
     out.summary = filter_summary(out, counts, notes, model.name, n_imu, ctx.t_start,
                                  ctx.timing,
-                                 {"imu": ctx.imu_report, "preprocessing": ctx.preprocessing})
+                                 {"imu": ctx.imu_report, "preprocessing": ctx.preprocessing,
+                                  **({"autotune": autotune} if autotune else {})})
     return out
 
 
+def _strapdown_filter(ctx: RunContext, tuned: Tuned, smoother: bool = True):
+    """Initialize, build the aiding and run the strapdown filter for a (tuned) job:
+    ``(filter result, initialization, aiding, IMU table)``. ``smoother=False`` is a run of the
+    self-tuning: no smoother, no progress bar, no innovation gate and no runaway-NIS stop (a
+    candidate noise model that fits badly is judged by its likelihood - robust to outliers,
+    :mod:`insgnss.autotune` - not stopped or cut off by the gate, which would make the
+    likelihood jump between nearby candidates)."""
+    job, inputs, model = tuned.job, tuned.inputs, tuned.model
+    init = initialize(job, inputs, model, tuned.windows)
+    imu = inputs.imu.loc[init.state.time:]
+    aiding = build_aiding(job, inputs, tuned.windows, imu)
+    aiding.require()
+    cfg = filter_config(job, model, init)
+    cfg.smoother = cfg.smoother and smoother
+    if not smoother:  # a self-tuning run: the likelihood judges the model, not the gate
+        cfg.nis_window = None
+        cfg.gate_probability = None
+        cfg.gate_recovery = None
+    if job["inputs"]["imu"]["gap_noise"]:
+        cfg.extra_noise = gap_noise(imu, ctx.imu_report["gaps"])  # bridged IMU gaps
+    res = run_filter(imu, init.state, aiding.models, cfg, progress=ctx.progress and smoother)
+    return res, init, aiding, imu
+
+
 def run_strapdown(ctx: RunContext) -> JobResult:
-    """LLF strapdown error-state filter (+ smoother) with the job's aiding."""
+    """LLF strapdown error-state filter (+ smoother) with the job's aiding; with
+    ``filter.autotune`` the noise parameters estimated first (:mod:`.tuning`)."""
     job, inputs, model = ctx.job, ctx.inputs, ctx.model
     check_aiding(job, inputs, ctx.windows)
     init = initialize(job, inputs, model, ctx.windows)
-    if job["filter"]["noise_from_static"] and init.static_end is not None:
-        model = with_static_noise(model, inputs.imu.loc[:init.static_end])
-        ctx.preprocessing["gyro_arw_deg_sqrt_h"] = float(np.degrees(model.gyro_arw) * 60)
-        ctx.preprocessing["accel_vrw_m_s_sqrt_h"] = float(model.accel_vrw * 60)
-    imu = inputs.imu.loc[init.state.time:]
-    aiding = build_aiding(job, inputs, ctx.windows, imu)
-    aiding.require()
-    cfg = filter_config(job, model, init)
-    if job["inputs"]["imu"]["gap_noise"]:
-        cfg.extra_noise = gap_noise(imu, ctx.imu_report["gaps"])  # bridged IMU gaps
-    res = run_filter(imu, init.state, aiding.models, cfg, progress=ctx.progress)
-    return _filter_result(ctx, init, res, aiding, model, len(imu))
+    model = static_noise_model(ctx, init, model)
+    tuned = Tuned(job, inputs, model, list(ctx.windows))
+    tune_result = None
+    if job["filter"]["autotune"]:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")  # the final run below warns about its own data
+            theta, tune_result = autotune(
+                ctx, model, lambda t: _strapdown_filter(ctx, t, False)[0],
+                lambda t: build_aiding(t.job, t.inputs, t.windows, t.inputs.imu))
+        tuned = apply(ctx, model, theta)
+    res, init, aiding, imu = _strapdown_filter(ctx, tuned)
+    if tune_result is not None:
+        ctx = replace(ctx, job=tuned.job, inputs=tuned.inputs)
+    return _filter_result(ctx, init, res, aiding, tuned.model, len(imu),
+                          None if tune_result is None else tune_result.as_dict())
 
 
 def run_riss(ctx: RunContext) -> JobResult:
@@ -171,7 +226,8 @@ def run_foot(ctx: RunContext) -> JobResult:
                               fr.trajectory[en].to_numpy() if cfg.smooth else None)
     out.summary = {
         "job": job_name(job), "source": inputs.source, **status(out),
-        "preset": "foot", "imu_samples": int(len(inputs.imu)), "zupt_updates": fr.n_updates,
+        "preset": "foot", "platform": platform_summary(job),
+        "imu_samples": int(len(inputs.imu)), "zupt_updates": fr.n_updates,
         "initialization": initialization_summary(init),
         "measurements": {"zupt": {"offered": still, "applied": int(fr.n_updates),
                                   "rejected": 0, "recovered": 0, "unusable": 0}},
