@@ -190,7 +190,8 @@ def view_weights(counts: dict) -> dict:
 
 def tune(run: Callable[[dict], pd.DataFrame | None], parameters: Sequence[Parameter], *,
          sweeps: int = 2, types: Sequence[str] | None = None,
-         progress: Callable[[str], None] | None = None) -> TuneResult:
+         progress: Callable[[str], None] | None = None,
+         reference: dict | None = None) -> TuneResult:
     """Maximum-likelihood estimate of ``parameters`` (module docstring).
 
     Parameters
@@ -207,6 +208,9 @@ def tune(run: Callable[[dict], pd.DataFrame | None], parameters: Sequence[Parame
         prior run).
     progress : callable, optional
         Receives a line of text per evaluation.
+    reference : dict, optional
+        The values the likelihood-ratio test of observability compares with and that an
+        unobservable parameter keeps (default: the priors, which are also the start).
     """
     params = list(parameters)
     theta0 = {p.name: p.prior for p in params}
@@ -275,10 +279,11 @@ def tune(run: Callable[[dict], pd.DataFrame | None], parameters: Sequence[Parame
             theta[p.name], best = p.to_value(better[0]), better[1]
         at_bound = d["down"] is None or d["up"] is None
         # the likelihood-ratio test of the prior against the estimate (the others at theirs)
-        dll_prior = best - objective({**theta, p.name: p.prior})
+        prior = p.prior if reference is None else reference[p.name]
+        dll_prior = best - objective({**theta, p.name: prior})
         observable = bool(dll_prior >= OBSERVABLE_DLL)
-        values[p.name] = theta[p.name] if observable else p.prior
-        table[p.name] = {"value": values[p.name], "prior": p.prior, "estimate": theta[p.name],
+        values[p.name] = theta[p.name] if observable else prior
+        table[p.name] = {"value": values[p.name], "prior": prior, "estimate": theta[p.name],
                          "unit": p.unit, "observable": observable, "at_bound": at_bound,
                          "dll_prior": dll_prior, "dll_down": d["down"], "dll_up": d["up"],
                          "doc": p.doc}

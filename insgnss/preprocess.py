@@ -12,7 +12,9 @@ positive like the course). :func:`estimate_time_offset` finds the shift ``dt`` o
 stamps that minimises the RMS difference between the GNSS course rate and the gyro yaw rate
 averaged over the same span, using only GNSS epochs above ``min_speed`` and outside outage
 windows (so it never uses withheld data), refined to sub-sample precision by a parabola through
-the three best shifts. Corrected IMU time = IMU time + ``dt``.
+the three best shifts. Corrected IMU time = IMU time + ``dt``. A best shift whose RMS is within
+:data:`TIME_TAG_EVIDENCE` (5 %) of the RMS at zero shift is no evidence of an offset (noisy
+positions make the course rate noise): the estimate is then 0 (``info["applied"]`` false).
 
 GNSS position outliers (a float solution jumping tens of metres) make the central-difference
 course rate absurd at the neighbouring epochs; they are excluded before the fit: epochs whose
@@ -55,6 +57,10 @@ from .errors import InvalidValueError
 from .imu import ImuErrorModel
 from .outages import in_windows
 from .validate import check_time_overlap
+
+#: a time shift (IMU offset, velocity lag) is applied only when it lowers the RMS misfit by this
+#: share against no shift (otherwise the data cannot tell: noisy or static data, correct tags)
+TIME_TAG_EVIDENCE = 0.05
 
 
 def estimate_time_offset(imu: pd.DataFrame, gnss: pd.DataFrame, windows=(), *,
@@ -124,16 +130,20 @@ def estimate_time_offset(imu: pd.DataFrame, gnss: pd.DataFrame, windows=(), *,
         den = y0 - 2 * y1 + y2
         if den > 0:
             dt += 0.5 * step * (y0 - y2) / den
+    r0 = float(rms[np.argmin(np.abs(shifts))])
     info = {"epochs": int(ok.sum()), "outliers": int(ok.sum() - use.sum()),
             "rms_rate_deg_s": float(np.degrees(rms[k])),
-            "rms_rate_at_zero_deg_s": float(np.degrees(rms[np.argmin(np.abs(shifts))])),
+            "rms_rate_at_zero_deg_s": float(np.degrees(r0)),
             "at_search_edge": bool(k in (0, len(shifts) - 1))}
+    # noisy positions (a single-point fix at 1 Hz) make the course rate noise: a best shift
+    # that hardly beats no shift is no evidence of an offset
+    info["applied"] = bool(r0 - float(rms[k]) > TIME_TAG_EVIDENCE * float(rms[k]))
+    if not info["applied"]:
+        info["reason"] = "no evidence of an offset"
+        return 0.0, info
     return dt, info
 
 
-#: a velocity lag is applied only when it lowers the RMS velocity difference by this share
-#: against no shift (otherwise the data cannot tell: a static receiver, or correct tags)
-VELOCITY_LAG_EVIDENCE = 0.05
 
 
 def estimate_velocity_lag(gnss: pd.DataFrame, windows=(), *, steps: int = 50
@@ -141,7 +151,7 @@ def estimate_velocity_lag(gnss: pd.DataFrame, windows=(), *, steps: int = 50
     """How far the GNSS velocity time tags lag the positions [s] (module docstring).
 
     Returns ``(lag, info)``; ``lag`` is 0 when the data shows no evidence of one
-    (:data:`VELOCITY_LAG_EVIDENCE`) or too few moving epochs. The velocities belong to
+    (:data:`TIME_TAG_EVIDENCE`) or too few moving epochs. The velocities belong to
     ``tag - lag``.
     """
     tg = gnss.index.to_numpy(float)
@@ -191,7 +201,7 @@ def estimate_velocity_lag(gnss: pd.DataFrame, windows=(), *, steps: int = 50
     info = {"epochs": int(ok.sum()), "outliers": int((~keep).sum()), "lag_s": lag,
             "rms_at_lag_m_s": float(r[k]),
             "rms_at_zero_m_s": r0, "epoch_interval_s": dt_med}
-    info["applied"] = bool(r0 - float(r[k]) > VELOCITY_LAG_EVIDENCE * float(r[k]))
+    info["applied"] = bool(r0 - float(r[k]) > TIME_TAG_EVIDENCE * float(r[k]))
     if not info["applied"]:
         info["reason"] = "no evidence of a lag"
         return 0.0, info

@@ -9,9 +9,11 @@ default (:mod:`insgnss.config`, which validates the profiles against its schema 
 job: schema default < profile < job file).
 
 The values are data, not branches: a new platform is a new table in the TOML file. Each one is
-chosen from the physics of the platform (docs/generalization.md). A profile never sets a noise
-value; those come from the IMU grade, the still periods found in the data or the maximum
-likelihood self-tuning (:mod:`insgnss.autotune`).
+chosen from the physics of the platform (docs/generalization.md), the sigmas of the platform's
+own constraints included (how far a car's wheels slip sideways: ``aiding.nhc_std``; how well a
+hand-held device points along the path: ``course_heading_std_deg``). The sensor's noise (IMU,
+GNSS) never comes from a platform: from the IMU grade, the still periods found in the data or
+the maximum likelihood self-tuning (:mod:`insgnss.autotune`).
 
 Which job keys count as *tuned noise values* (:func:`tuned_noise_keys`) is defined here too,
 because it is the complement of what profiles and self-tuning provide: a job that carries one

@@ -212,6 +212,7 @@ def summary_html(result, data: ReportData) -> str:
     ini = s.get("initialization") or {}
     parts = [banner_html(s)]
     run = [("job", s.get("job")), ("source", s.get("source")), ("seed", s.get("seed")),
+           ("platform", (s.get("platform") or {}).get("name")),
            ("insgnss version", _version(s)),
            ("process", s.get("preset") or s.get("process_model")),
            ("complete", s.get("complete")), ("IMU samples", s.get("imu_samples")),
@@ -236,8 +237,22 @@ def summary_html(result, data: ReportData) -> str:
             [{"stage": k, "seconds": v} for k, v in timing.items()]), left=("stage",)))
     if s.get("preprocessing"):
         parts.append("<h3>Preprocessing</h3>" + _kv(_flatten(s["preprocessing"])))
-    if s.get("autotune"):
-        parts.append("<h3>Autotuned parameters</h3>" + _kv(_flatten(s["autotune"])))
+    at = s.get("autotune")
+    if at and isinstance(at.get("parameters"), dict):
+        ll = at.get("log_likelihood") or {}
+        parts.append(
+            "<h3>Self-tuned noise (maximum likelihood, docs/filter.md)</h3><p class='note'>"
+            + html.escape(f"{at.get('sweeps')} sweeps, {at.get('evaluations')} filter runs; "
+                          f"log-likelihood {fmt(ll.get('prior'))} with the priors, "
+                          f"{fmt(ll.get('final'))} tuned. A parameter that is not observable "
+                          "keeps its prior.") + "</p>"
+            + table_html(pd.DataFrame([
+                {"parameter": k, "value": v.get("value"), "prior": v.get("prior"),
+                 "unit": v.get("unit", ""), "observable": v.get("observable"),
+                 "log-lik. gain over prior": v.get("dll_prior")}
+                for k, v in at["parameters"].items()]), left=("parameter", "unit")))
+    elif at:
+        parts.append("<h3>Autotuned parameters</h3>" + _kv(_flatten(at)))
     ev = s.get("evaluation") or {}
     if ev:
         rows = [{"solution": name, **{h: e.get(k) for k, h in ACCURACY_COLUMNS.items()}}

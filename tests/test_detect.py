@@ -321,3 +321,43 @@ def test_stance_entry_rms():
     assert stance_entry_rms(nu, still) == pytest.approx(np.sqrt((0.25 + 0.01 + 0.04) / 3))
     assert stance_entry_rms(nu, still, min_stances=4) == np.inf
     assert stance_entry_rms(np.full((30, 3), np.nan), still) == np.inf  # no updates applied
+
+
+# --- static windows found in the data ---------------------------------------------------------
+def _still_then_hand_then_walk(rate=100.0, seed=4):
+    """A device still on a table (0-5 s, sensor noise 0.01 m/s^2 and 0.002 rad/s), then held in
+    a trembling hand (5-10 s: 0.4 m/s^2, 0.05 rad/s at 2-4 Hz), then carried walking."""
+    rng = np.random.default_rng(seed)
+    t = np.arange(0.0, 20.0, 1.0 / rate)
+    f = np.zeros((t.size, 3))
+    f[:, 2] = 9.81
+    w = np.zeros((t.size, 3))
+    hand = (t >= 5.0) & (t < 10.0)
+    walk = t >= 10.0
+    f[hand, 0] += 0.4 * np.sin(2 * np.pi * 3.0 * t[hand])
+    w[hand, 1] += 0.05 * np.sin(2 * np.pi * 2.0 * t[hand])
+    f[walk, 2] += 2.0 * np.sin(2 * np.pi * 2.0 * t[walk])
+    w[walk, 2] += 0.5 * np.sin(2 * np.pi * 1.0 * t[walk])
+    f += 0.01 * rng.standard_normal(f.shape)
+    w += 0.002 * rng.standard_normal(w.shape)
+    return rates_table(t, w, f)
+
+
+def test_static_windows_tell_still_from_stationary():
+    from insgnss.detect import find_static_windows
+
+    imu = _still_then_hand_then_walk()
+    sw = find_static_windows(imu, max_accel_std=1.0, max_rate_std=np.radians(10.0))
+    # the floor is the sensor noise (vector std of 3 axes of 0.01)
+    assert sw.accel_floor == pytest.approx(0.01 * np.sqrt(3), rel=0.3)
+    (a0, a1), = [s for s in sw.still if s[0] < 1.0]
+    assert a0 == 0.0 and 4.4 <= a1 <= 5.0  # the table, minus the window overhang
+    stationary = [s for s in sw.stationary if s[0] < 1.0][0]
+    assert 9.4 <= stationary[1] <= 10.0  # the hand is stationary, not still
+    assert all(b < 10.0 for _, b in sw.stationary)  # walking is neither
+    a, _ = sw.motion(6.0, 9.0)
+    assert a == pytest.approx(0.4 / np.sqrt(2), rel=0.2)  # the hand's motion is measured
+    # an excluded interval (a bridged gap, GNSS showing motion) is never static
+    sw2 = find_static_windows(imu, max_accel_std=1.0, max_rate_std=np.radians(10.0),
+                              exclude=[(2.0, 2.1)])
+    assert [s for s in sw2.still if s[0] < 1.0][0][1] < 2.0

@@ -19,6 +19,7 @@ def drive_result(request):
 
     shared_data("gnss-imu-rtklibexplorer", "drive_0708")
     job = load_job(REPO / "scenarios" / "drive_0708.toml")
+    job.settings["filter"]["autotune"] = False  # the profile's prior model (bench_drive: tuned)
     return run_job(job, progress=False)
 
 
@@ -113,12 +114,42 @@ def test_bundled_demo_runs_end_to_end(tmp_path):
         assert (out / name).stat().st_size > 0
 
 
+def _untuned_drive_job(tmp_path):
+    """A copy of the drive job (absolute paths) with the self-tuning off, for the tests that
+    check other mechanisms on it (the tuned run takes minutes)."""
+    import tomllib
+
+    data = tomllib.loads((REPO / "scenarios" / "drive_0708.toml").read_text())
+    for spec in data["inputs"].values():
+        for k in ("path", "tag"):
+            if k in spec:
+                spec[k] = str((REPO / "scenarios" / spec[k]).resolve())
+    data["filter"]["autotune"] = False
+    data["outputs"]["dir"] = str(tmp_path / "out")
+
+    def toml(d, prefix=""):
+        lines, tables = [], []
+        for k, v in d.items():
+            if isinstance(v, dict) and k != "q_scale":
+                tables.append((f"{prefix}{k}", v))
+            else:
+                lines.append(f"{k} = {json.dumps(v)}")
+        out = ([f"[{prefix.rstrip('.')}]"] if prefix and lines else []) + lines
+        for name, t in tables:
+            out += toml(t, name + ".")
+        return out
+
+    path = tmp_path / "drive_untuned.toml"
+    path.write_text("\n".join(toml(data)) + "\n")
+    return path
+
+
 def test_compare_cli_on_the_drive_job(drive_result, tmp_path):
     """`insgnss compare` runs free-inertial, GNSS-only and the job's own aided forward and
     smoothed solutions on the same data (issue 5), with the antenna lever arm applied."""
     from insgnss.cli import main
 
-    rc = main(["compare", str(REPO / "scenarios" / "drive_0708.toml"), "-o", str(tmp_path),
+    rc = main(["compare", str(_untuned_drive_job(tmp_path)), "-o", str(tmp_path),
                "--runs", "free,job,job_smoothed", "--no-figures"])
     assert rc == 0
     s = json.loads((tmp_path / "compare_summary.json").read_text())
@@ -138,3 +169,32 @@ def test_compare_full_imu_against_riss(tmp_path):
     tab = json.loads((tmp_path / "compare_summary.json").read_text())["table"]
     # consumer MEMS, two 90 s GNSS outages: RISS drifts far less than the full IMU
     assert tab["riss"]["max_h_err_m"] < 0.2 * tab["job"]["max_h_err_m"]
+
+
+def test_velocity_lag_estimated_from_the_data():
+    """Velocities that are backward differences of the positions (tagged at the end of the
+    interval) lag by half an epoch; correctly tagged ones do not."""
+    import numpy as np
+    import pandas as pd
+
+    from insgnss.earth import enu_to_geodetic
+    from insgnss.preprocess import estimate_velocity_lag
+
+    dt = 0.25
+    t = np.arange(0.0, 120.0, dt)
+    # a curved, accelerating path: v = (3 + sin(0.3 t), 2 cos(0.2 t))
+    e = 3 * t - np.cos(0.3 * t) / 0.3
+    n = 2 * np.sin(0.2 * t) / 0.2
+    lat, lon, h = enu_to_geodetic(e, n, 0 * t, 0.7, 0.1, 100.0)
+
+    def table(ve, vn):
+        return pd.DataFrame({"lat": lat, "lon": lon, "height": h, "vel_e": ve, "vel_n": vn,
+                             "vel_u": 0 * t}, index=pd.Index(t, name="time"))
+
+    ve_true, vn_true = 3 + np.sin(0.3 * t), 2 * np.cos(0.2 * t)
+    ve_bd = np.r_[ve_true[0], np.diff(e) / dt]  # backward differences
+    vn_bd = np.r_[vn_true[0], np.diff(n) / dt]
+    lag, info = estimate_velocity_lag(table(ve_bd, vn_bd))
+    assert info["applied"] and lag == pytest.approx(dt / 2, abs=0.01)
+    lag0, info0 = estimate_velocity_lag(table(ve_true, vn_true))
+    assert lag0 == pytest.approx(0.0, abs=0.01)

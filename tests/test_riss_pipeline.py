@@ -18,6 +18,7 @@ SCENARIO = Path(__file__).resolve().parents[1] / "scenarios" / "land_vehicle_odo
 
 def _job(**changes):
     data = tomllib.loads(SCENARIO.read_text())
+    data["job"] = {"platform": "generic"}  # GNSS aiding only: the RISS mechanics
     data["filter"] = {"process_model": "riss", "smoother": True}
     # the simulated GNSS is flagged q = 5 (single point) with its true sigma
     data["aiding"] = {"gnss_velocity": True, "q_scale": {"5": 1.0}}

@@ -298,7 +298,15 @@ def _initialize(job: Job, inputs: Inputs, model: ImuErrorModel, windows) -> Init
     # the vehicle is still over the window, so the aligned attitude holds from its start: the
     # filter runs from there (covering the window, with ZUPT/ZARU if enabled)
     t_begin = float(win.index[0])
-    st = NavState(*position_at(t_begin, C), np.zeros(3), C, t_begin)
+    t_pos = t_begin
+    if gnss is not None and len(gnss):
+        # the platform does not move over the window: any usable GNSS epoch inside it gives
+        # the position at its start (the IMU may start just before the first epoch)
+        tg = gnss.index.to_numpy(float)
+        inside = tg[(tg >= t_begin) & (tg <= float(win.index[-1]))]
+        if inside.size and (tg[0] > t_begin):
+            t_pos = float(inside[0])
+    st = NavState(*position_at(t_pos, C), np.zeros(3), C, t_begin)
     return Initialization(st, method, src, gyro_bias=None, att_std=att_std, pos_std=pos_std,
                           vel_std=0.02, static_end=t_end,
                           levelled=bool(job["filter"]["levelling_correlation"]),

@@ -278,19 +278,16 @@ def autotune(ctx: RunContext, model: ImuErrorModel, run_one, build_aiding
         return first.values, first
     # stage 2: both views, from the one-step estimates
     start = [replace(p, prior=min(max(first.values[p.name], p.lower), p.upper)) for p in params]
-    second = tune(cached, start, sweeps=sweeps, progress=log)
+    second = tune(cached, start, sweeps=sweeps, progress=log,
+                  reference={p.name: p.prior for p in params})
     for name, row in second.parameters.items():
-        row["prior"] = next(p.prior for p in params if p.name == name)
         row["one_step_estimate"] = first.parameters[name]["estimate"]
     second.log_likelihood["one_step_prior"] = first.log_likelihood["prior"]
     second.log_likelihood["one_step_final"] = first.log_likelihood["final"]
     second.evaluations += first.evaluations
     second.sweeps += first.sweeps
     second.tuning_windows = [list(w) for w in tuning]
-    values = {name: row["value"] if row["observable"] else row["prior"]
-              for name, row in second.parameters.items()}
-    for name, row in second.parameters.items():
-        row["value"] = values[name]
+    values = second.values
     return values, second
 
 
