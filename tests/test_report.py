@@ -51,6 +51,7 @@ def drive(tmp_path_factory):
 
     shared_data("gnss-imu-rtklibexplorer", "drive_0708")
     job = set_outputs(load_job(REPO / "scenarios" / "drive_0708.toml"), figures=["svg"])
+    job.settings["filter"]["autotune"] = False  # the report's figures, not the self-tuning
     res = run_job(job, progress=False)
     out = tmp_path_factory.mktemp("drive")
     return res, out, write_outputs(res, out)
