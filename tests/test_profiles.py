@@ -98,3 +98,24 @@ def test_docs_generalization_lists_the_profiles():
     for line in profiles.markdown().splitlines():
         if line.startswith("| `"):
             assert line in doc, f"docs/generalization.md lacks {line}"
+
+
+def test_bench_generalize_fails_on_a_tuned_value(tmp_path):
+    import importlib.util
+
+    spec = importlib.util.spec_from_file_location("bench_generalize",
+                                                  REPO / "bench" / "bench_generalize.py")
+    bench = importlib.util.module_from_spec(spec)
+    import sys
+
+    sys.modules["bench_generalize"] = bench  # its dataclasses look their module up
+    spec.loader.exec_module(bench)
+    assert bench.check_jobs(bench.ROWS) == []  # the protocol's own jobs are clean
+    job = tmp_path / "scenarios" / "tuned.toml"
+    job.parent.mkdir()
+    job.write_text('[job]\nplatform = "car"\n[aiding]\nnhc = true\nnhc_std = [0.05, 0.05]\n'
+                   '[filter.imu_model]\naccel_bias_instability_ug = 2000.0\n')
+    bench.REPO = tmp_path
+    row = bench.Row("tuned", "report", "car", lambda: {}, job)
+    bad = bench.check_jobs([row])
+    assert len(bad) == 2 and "aiding.nhc_std" in bad[0] and "accel_bias_instability_ug" in bad[1]
