@@ -375,6 +375,12 @@ def _spec(kind, default=None, doc: str = "", choices=None, check: Rule | None = 
 
 POSITIVE_SECONDS = _number(0.0, lo_open=True, note="s")
 
+#: names of the self-tuning's parameters (insgnss.job.tuning builds them, docs/filter.md)
+AUTOTUNE_PARAMETERS = ("imu_time_offset", "gnss_pos_scale",
+                       *(f"gnss_pos_scale_q{q}" for q in range(1, 7)), "gnss_vel_scale",
+                       "accel_vrw", "gyro_arw", "accel_bias_instability",
+                       "gyro_bias_instability", "nhc_std", "zupt_std")
+
 #: Schema: table -> key -> spec (:func:`_spec`); a dict without a ``"type"`` entry is a
 #: sub-table. ``_ANY`` accepts any TOML value.
 SCHEMA: dict[str, Any] = {
@@ -681,8 +687,8 @@ SCHEMA: dict[str, Any] = {
         "autotune_sweeps": _spec(int, 2, "coordinate sweeps of the self-tuning",
                                  check=_integer(1), when=_on("filter.autotune")),
         "autotune_parameters": _spec(list, None, "parameters the self-tuning estimates "
-                                     "(default: every one the job's aiding can inform; names "
-                                     "in docs/filter.md)", check=NONEMPTY,
+                                     "(default: every one the job's aiding can inform; "
+                                     "docs/filter.md)", choices=list(AUTOTUNE_PARAMETERS),
                                      when=_on("filter.autotune")),
         "riss": {
             "odometer_scale_std": _spec(_NUM, 0.02, "RISS: initial odometer scale-factor sigma",

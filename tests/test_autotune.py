@@ -128,7 +128,8 @@ def _sim_job(autotune: bool):
         "outages": {"windows": [[100.0, 115.0], [200.0, 215.0]]},
         "filter": {"imu_grade": "tactical", "autotune": autotune, "smoother": False,
                    "bias_model": "random_constant",
-                   "autotune_parameters": ["gnss_pos_scale_q5", "accel_vrw", "gyro_arw"],
+                   **({"autotune_parameters": ["gnss_pos_scale_q5", "accel_vrw", "gyro_arw"]}
+                      if autotune else {}),
                    # the fixed model: white noise 3x too small, biases right
                    "imu_model": {"gyro_arw_deg_sqrt_h": TRUE_ARW / 3,
                                  "accel_vrw_m_s_sqrt_h": TRUE_VRW / 3,
