@@ -108,6 +108,20 @@ def _somigliana(s2, h):
     )
 
 
+@njit(cache=True, inline="always")
+def gravity_gradient_somigliana(s, c, h):
+    """``(dg/dlat [m/s^2/rad], dg/dh [1/s^2])`` of :func:`gravity_somigliana` from ``sin(lat)``,
+    ``cos(lat)`` (analytic: ``g = g0(s2) H(s2, h)``, ``ds2/dlat = 2 s c``)."""
+    s2 = s * s
+    w = 1.0 - E2 * s2
+    g0 = GAMMA_E * (1.0 + K_SOMIGLIANA * s2) / np.sqrt(w)
+    c1 = 1.0 + F + M_RATIO - 2.0 * F * s2
+    Hh = 1.0 - 2.0 / A * c1 * h + 3.0 * h * h / (A * A)
+    dg0 = g0 * (K_SOMIGLIANA / (1.0 + K_SOMIGLIANA * s2) + 0.5 * E2 / w)
+    dH = 4.0 * F / A * h
+    return 2.0 * s * c * (dg0 * Hh + g0 * dH), g0 * (-2.0 / A * c1 + 6.0 * h / (A * A))
+
+
 @njit(cache=True)
 def gravity_somigliana(lat, h):
     """Normal gravity magnitude [m/s^2]: Somigliana closed form on the ellipsoid with the

@@ -9,7 +9,7 @@ import scipy.linalg
 from filter_sim import turning_truth
 
 from insgnss.attitude import attitude_error, euler_to_dcm, rotvec_to_dcm
-from insgnss.earth import radii
+from insgnss.earth import normal_gravity, radii
 from insgnss.filter import ExtraState, StateLayout, error_dynamics, kernels, process_model
 from insgnss.imu import grade, increments
 from insgnss.mechanization.inverse import inverse_mechanize
@@ -126,7 +126,14 @@ def test_error_dynamics_wrapper_matches_known_blocks():
     assert np.allclose(F[3:6, 6:9], -np.array([[0, -9.8, 1.0], [9.8, 0, 0], [-1.0, 0, 0]]))
     assert np.allclose(F[3:6, 12:15], -C) and np.allclose(F[6:9, 9:12], -C)
     M, N = radii(lat)
-    assert F[5, 2] == pytest.approx(2 * 9.806 / (np.sqrt(M * N) + h), rel=2e-3)
+    # gravity gradient: -dg/dh (0.34 % above 2 g / sqrt(M N)) and -dg/dlat / (M + h)
+    assert F[5, 2] == pytest.approx((normal_gravity(lat, h - 1) - normal_gravity(lat, h + 1)) / 2,
+                                    rel=1e-9)
+    assert F[5, 2] == pytest.approx(1.0034 * 2 * normal_gravity(lat, h) / (np.sqrt(M * N) + h),
+                                    rel=3e-4)
+    e = 1e-5
+    assert F[5, 1] == pytest.approx(-(normal_gravity(lat + e, h) - normal_gravity(lat - e, h))
+                                    / (2 * e) / (M + h), rel=1e-6)
 
 
 def _random_FQ(rng, n=15, T=0.1):

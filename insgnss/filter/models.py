@@ -26,10 +26,13 @@ Continuous error dynamics (Groves 2013 eqs. 14.64, 14.69, 14.71 rewritten for EN
     d(b)/dt   = -b / tau + w_b         (first-order Gauss-Markov; tau = inf: random walk)
 
 with ``F_vv = -[(2 w_ie + w_el) x] + [v x] dW_el/dv``, ``F_vr = [v x] (2 dW_ie/dr + dW_el/dr)``
-plus the vertical gravity gradient ``+2 g / R`` (the unstable vertical channel),
+plus the gravity gradient ``-dg/dh`` (about ``+2 g / R``: the unstable vertical channel) and
+``-dg/dlat / (M + h)`` in ``F[vu, rn]``,
 ``F_pr = -(dW_ie/dr + dW_el/dr)``, ``F_pv = -dW_el/dv`` and the small terms of the
-radii in ``F_rr``. ``w_g``, ``w_a`` are the gyro / accelerometer white noises (ARW and VRW
-densities), ``w_b`` the driving noise of the bias processes.
+radii in ``F_rr``; ``dW/dr`` include the latitude derivatives of ``M`` and ``N``. Every entry
+matches a numerical Jacobian of the exact equations (tests/test_linearization.py). ``w_g``,
+``w_a`` are the gyro / accelerometer white noises (ARW and VRW densities), ``w_b`` the driving
+noise of the bias processes.
 
 For short pedestrian runs, :func:`accumulate_short_term_dynamics` is the same model without the
 Earth-rate, transport-rate and gravity-gradient couplings (``FilterConfig.error_dynamics =
@@ -48,7 +51,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from numba import njit
 
-from ..earth import OMEGA_E, gravity_somigliana, normal_gravity, radii
+from ..earth import E2, OMEGA_E, gravity_gradient_somigliana, radii
 from ..imu import ImuErrorModel, grade
 
 #: indices of the core blocks
@@ -419,14 +422,20 @@ def accumulate_error_dynamics(F, dt, lat, h, vel, C, dth_b, dv_b, i_sg, i_sa):
     sl = np.sin(lat)
     cl = np.cos(lat)
     tl = sl / cl
+    # radius derivatives dN/dlat = N e^2 s c / w, dM/dlat = 3 M e^2 s c / w (w = 1 - e^2 s^2)
+    q = E2 * sl * cl / (1.0 - E2 * sl * sl)
+    dN = N * q
+    dM = 3.0 * M * q
     # --- d(omega_ie + omega_el)/d(dr), d(omega_el)/d(dv)
     # dW_ie/dr: only the north column
     wie_rn1 = -OMEGA_E * sl / Rm
     wie_rn2 = OMEGA_E * cl / Rm
-    # dW_el/dr (columns n = 1, u = 2)
+    # dW_el/dr (columns n = 1, u = 2); d(dr_n) = (M + h) d(lat) moves M and N too
+    wel_r01 = vn * dM / (Rm * Rm * Rm)
+    wel_r11 = -ve * dN / (Rn * Rn * Rm)
+    wel_r21 = ve / (cl * cl * Rn * Rm) - ve * tl * dN / (Rn * Rn * Rm)
     wel_r02 = vn / (Rm * Rm)
     wel_r12 = -ve / (Rn * Rn)
-    wel_r21 = ve / (cl * cl * Rn * Rm)
     wel_r22 = -ve * tl / (Rn * Rn)
     # dW_el/dv
     wel_v01 = -1.0 / Rm
@@ -439,8 +448,9 @@ def accumulate_error_dynamics(F, dt, lat, h, vel, C, dth_b, dv_b, i_sg, i_sa):
     wel_n = ve / Rn
     wel_u = ve * tl / Rn
     # --- position rows
-    F[0, 0] += (vu / Rn - vn * tl / Rm) * dt
-    F[0, 1] += ve * tl / Rm * dt
+    # d(dr_e)/dt = d/dt[(N + h) cos lat] / ((N + h) cos lat) dr_e + (N + h) cos(lat) d(lon rate)
+    F[0, 0] += (vu / Rn - vn * tl / Rm + vn * dN / (Rm * Rn)) * dt
+    F[0, 1] += (ve * tl / Rm - ve * dN / (Rn * Rm)) * dt
     F[0, 2] += -ve / Rn * dt
     F[0, 3] += dt
     F[1, 1] += vu / Rm * dt
@@ -463,21 +473,25 @@ def accumulate_error_dynamics(F, dt, lat, h, vel, C, dth_b, dv_b, i_sg, i_sa):
     F[5, 3] += (cn + ve * wel_v10) * dt
     F[5, 4] += (-ce - vn * wel_v01) * dt
     # F_vr = [v x] (2 dW_ie/dr + dW_el/dr) + gravity gradient
-    # columns of K = 2 dW_ie/dr + dW_el/dr: col1 = (0, 2 wie_rn1, 2 wie_rn2 + wel_r21);
-    # col2 = (wel_r02, wel_r12, wel_r22)
-    k11 = 2.0 * wie_rn1
+    # columns of K = 2 dW_ie/dr + dW_el/dr: col1 = (wel_r01, 2 wie_rn1 + wel_r11,
+    # 2 wie_rn2 + wel_r21); col2 = (wel_r02, wel_r12, wel_r22)
+    k01 = wel_r01
+    k11 = 2.0 * wie_rn1 + wel_r11
     k21 = 2.0 * wie_rn2 + wel_r21
     k02 = wel_r02
     k12 = wel_r12
     k22 = wel_r22
     F[3, 1] += (vn * k21 - vu * k11) * dt
-    F[4, 1] += (-ve * k21) * dt
-    F[5, 1] += (ve * k11) * dt
+    F[4, 1] += (vu * k01 - ve * k21) * dt
+    F[5, 1] += (ve * k11 - vn * k01) * dt
     F[3, 2] += (vn * k22 - vu * k12) * dt
     F[4, 2] += (vu * k02 - ve * k22) * dt
     F[5, 2] += (ve * k12 - vn * k02) * dt
-    g = gravity_somigliana(lat, h)  # the gradient term does not need the model choice
-    F[5, 2] += 2.0 * g / (np.sqrt(M * N) + h) * dt
+    # gravity g^l = (0, 0, -g(lat, h)): -dg/dlat / (M + h) and -dg/dh (the unstable vertical
+    # channel, ~ +2 g / R); Somigliana's gradient for every model (they differ by < 1e-3 of it)
+    dg_dlat, dg_dh = gravity_gradient_somigliana(sl, cl, h)
+    F[5, 1] -= dg_dlat / Rm * dt
+    F[5, 2] -= dg_dh * dt
     _sensor_error_terms(F, dt, C, dth_b, dv_b, i_sg, i_sa)
     # --- attitude rows
     # -[w_il x] phi
@@ -491,8 +505,9 @@ def accumulate_error_dynamics(F, dt, lat, h, vel, C, dth_b, dv_b, i_sg, i_sa):
     F[8, 6] += wn * dt
     F[8, 7] += -we * dt
     # -(dW_ie/dr + dW_el/dr) dr
+    F[6, 1] -= wel_r01 * dt
     F[6, 2] -= wel_r02 * dt
-    F[7, 1] -= wie_rn1 * dt
+    F[7, 1] -= (wie_rn1 + wel_r11) * dt
     F[7, 2] -= wel_r12 * dt
     F[8, 1] -= (wie_rn2 + wel_r21) * dt
     F[8, 2] -= wel_r22 * dt
@@ -517,6 +532,6 @@ def error_dynamics(nav_lat: float, nav_h: float, vel, C, f_b, w_ib, layout: Stat
 
 
 def gravity_gradient(lat: float, h: float) -> float:
-    """Vertical gradient magnitude ``2 g / R`` used in F [1/s^2]."""
-    M, N = radii(lat)
-    return 2.0 * normal_gravity(lat, h) / (np.sqrt(M * N) + h)
+    """Vertical gradient magnitude ``-dg/dh`` used in ``F[vu, ru]`` [1/s^2] (Somigliana's,
+    about ``2 g / R`` plus 0.3 %)."""
+    return -float(gravity_gradient_somigliana(np.sin(lat), np.cos(lat), h)[1])
