@@ -17,8 +17,11 @@ import numpy as np
 from numba import njit
 
 from ..attitude import euler_to_dcm_nb, rotvec_to_dcm_nb
-from ..earth import gravity_somigliana, radii
+from ..earth import gravity_somigliana, normal_gravity_sc, radii
+from ..mechanization.core import _matmul3
 from ..mechanization.strapdown import STEP_WORK_SHAPE, strapdown_step
+from ..mechanization.wander import wander_step, wander_to_nav
+from .ecef_dynamics import accumulate_ecef_error_dynamics
 from .linalg import _copy, _mm, _mmspt, _sparse, _spmm
 from .models import accumulate_error_dynamics, accumulate_short_term_dynamics
 
@@ -41,12 +44,22 @@ def store_nav(nav_out, j, pos, vel, C):
     nav_out[j, 8] = a + 2.0 * np.pi if a < 0.0 else a
 
 
+@njit(cache=True)
+def store_nav_wander(nav_out, j, Cne, h, vel, C, buf):
+    """:func:`store_nav` for a wander nominal (``C_w^e``, height, ``v^w``, ``C_b^w``): the same
+    ENU columns (:func:`insgnss.mechanization.wander.wander_to_nav`; ``buf``: (10,) scratch)."""
+    wander_to_nav(Cne, h, vel, C, buf)
+    for i in range(9):
+        nav_out[j, i] = buf[i]
+
+
 _euler_dcm = euler_to_dcm_nb  # one compiled implementation (insgnss.attitude)
 
 
 @njit(cache=True)
 def interval_step(pos, vel, C, pnom, dth_j, dv_j, a, dt_s, i_sg, i_sa, gravity_model,
-                  attitude_update, F, Qg, Qa, q_g, q_a, dyn, dthc, dvc, work, dynamics=0):
+                  attitude_update, F, Qg, Qa, q_g, q_a, dyn, dthc, dvc, work, dynamics=0,
+                  Cne=None, hv=None, Cbe=None):
     """One IMU interval (share ``a`` of row ``dth_j, dv_j``, duration ``dt_s``) of the strapdown
     process model: compensate the increments with the nominal biases (and scale factors) in
     ``pnom``, add ``F dt`` (``dynamics`` 0: :func:`.models.accumulate_error_dynamics`, 1: the
@@ -59,6 +72,12 @@ def interval_step(pos, vel, C, pnom, dth_j, dv_j, a, dt_s, i_sg, i_sa, gravity_m
     g-sensitivity and vibration errors): a white error of the fraction ``k_a`` of the interval's
     dynamic velocity increment and ``k_g`` of its angle increment, i.e. the variances
     ``(k_a |C dv - g dt|)^2`` and ``(k_g |dtheta|)^2`` (isotropic) on the velocity and attitude.
+
+    Wander nominal (:mod:`.wander_model`): given ``Cne`` (``C_w^e``), ``hv`` (height, (1,)) and
+    the scratch ``Cbe`` (3x3), ``vel`` and ``C`` are ``v^w`` and ``C_b^w``, ``F`` is the ECEF
+    error dynamics (:func:`.ecef_dynamics.accumulate_ecef_error_dynamics`), the noise is
+    rotated by ``C_b^e`` and the nominal advances by
+    :func:`insgnss.mechanization.wander.wander_step` (``pos`` unused).
     """
     for i in range(3):
         g = a * dth_j[i] - pnom[i] * dt_s
@@ -69,17 +88,30 @@ def interval_step(pos, vel, C, pnom, dth_j, dv_j, a, dt_s, i_sg, i_sa, gravity_m
             f /= 1.0 + pnom[i_sa - 9 + i]
         dthc[i] = g
         dvc[i] = f
-    if dynamics == 0:
-        accumulate_error_dynamics(F, dt_s, pos[0], pos[2], vel, C, dthc, dvc, i_sg, i_sa)
+    if Cne is None:
+        Ce = C
+        if dynamics == 0:
+            accumulate_error_dynamics(F, dt_s, pos[0], pos[2], vel, C, dthc, dvc, i_sg, i_sa)
+        else:
+            accumulate_short_term_dynamics(F, dt_s, C, dthc, dvc, i_sg, i_sa)
     else:
-        accumulate_short_term_dynamics(F, dt_s, C, dthc, dvc, i_sg, i_sa)
+        _matmul3(Cne, C, Cbe)
+        Ce = Cbe
+        accumulate_ecef_error_dynamics(F, dt_s, Cne, hv[0], Cbe, dthc, dvc, i_sg, i_sa)
     va_dyn = 0.0
     vg_dyn = 0.0
     if dyn[0] > 0.0 or dyn[1] > 0.0:
-        de = C[0, 0] * dvc[0] + C[0, 1] * dvc[1] + C[0, 2] * dvc[2]
-        dn = C[1, 0] * dvc[0] + C[1, 1] * dvc[1] + C[1, 2] * dvc[2]
-        du = C[2, 0] * dvc[0] + C[2, 1] * dvc[1] + C[2, 2] * dvc[2]
-        du -= gravity_somigliana(pos[0], pos[2]) * dt_s
+        de = Ce[0, 0] * dvc[0] + Ce[0, 1] * dvc[1] + Ce[0, 2] * dvc[2]
+        dn = Ce[1, 0] * dvc[0] + Ce[1, 1] * dvc[1] + Ce[1, 2] * dvc[2]
+        du = Ce[2, 0] * dvc[0] + Ce[2, 1] * dvc[1] + Ce[2, 2] * dvc[2]
+        if Cne is None:
+            du -= gravity_somigliana(pos[0], pos[2]) * dt_s
+        else:  # minus g^e dt = +g u dt, u = C_w^e[:, 2]
+            gdt = normal_gravity_sc(Cne[2, 2], np.sqrt(Cne[2, 0] ** 2 + Cne[2, 1] ** 2), hv[0],
+                                    0) * dt_s
+            de -= gdt * Cne[0, 2]
+            dn -= gdt * Cne[1, 2]
+            du -= gdt * Cne[2, 2]
         va_dyn = dyn[0] * dyn[0] * (de * de + dn * dn + du * du)
         vg_dyn = dyn[1] * dyn[1] * (dthc[0] ** 2 + dthc[1] ** 2 + dthc[2] ** 2)
     for r in range(3):
@@ -87,8 +119,8 @@ def interval_step(pos, vel, C, pnom, dth_j, dv_j, a, dt_s, i_sg, i_sa, gravity_m
             qg = 0.0
             qa = 0.0
             for k in range(3):
-                qg += C[r, k] * q_g[k] * C[c, k]
-                qa += C[r, k] * q_a[k] * C[c, k]
+                qg += Ce[r, k] * q_g[k] * Ce[c, k]
+                qa += Ce[r, k] * q_a[k] * Ce[c, k]
             Qg[r, c] += qg * dt_s
             Qa[r, c] += qa * dt_s
             if c != r:
@@ -96,13 +128,17 @@ def interval_step(pos, vel, C, pnom, dth_j, dv_j, a, dt_s, i_sg, i_sa, gravity_m
                 Qa[c, r] += qa * dt_s
         Qg[r, r] += vg_dyn
         Qa[r, r] += va_dyn
-    strapdown_step(pos, vel, C, dthc, dvc, dt_s, gravity_model, attitude_update, False, work)
+    if Cne is None:
+        strapdown_step(pos, vel, C, dthc, dvc, dt_s, gravity_model, attitude_update, False, work)
+    else:
+        wander_step(Cne, hv, vel, C, dthc, dvc, dt_s, gravity_model, attitude_update, False, work)
 
 
 @njit(cache=True)
 def propagate_nominal(t, dth, dv, j, frac, t_end, pos, vel, C, pnom, i_sg, i_sa,
                       gravity_model, attitude_update, sub_T, Fint, Qint, sub_dt, q_g, q_a,
-                      nav_out, out_seg, seg_id, rates, dyn=None, dynamics=0):
+                      nav_out, out_seg, seg_id, rates, dyn=None, dynamics=0, Cne=None,
+                      hv=None):
     """Mechanize from the current point (row ``j``, share ``frac`` consumed) to ``t_end``.
 
     The nominal state ``pos, vel, C`` is advanced in place using the increments compensated
@@ -120,6 +156,9 @@ def propagate_nominal(t, dth, dv, j, frac, t_end, pos, vel, C, pnom, i_sg, i_sa,
     ``rates`` (4, 3) receives the compensated angular rate and specific force of the last
     interval (rows 0, 2) and their means over the segment (rows 1, 3).
 
+    Wander nominal: ``Cne`` (``C_w^e``) and ``hv`` (height, (1,)) given, ``vel`` and ``C`` are
+    ``v^w`` and ``C_b^w`` (:func:`interval_step`); the stored rows have the same ENU columns.
+
     Returns ``(j, frac, n_sub)``.
     """
     n_t = t.shape[0]
@@ -136,6 +175,8 @@ def propagate_nominal(t, dth, dv, j, frac, t_end, pos, vel, C, pnom, i_sg, i_sa,
     sum_dt = 0.0
     s = -1
     acc = 0.0
+    Cbe = np.empty((3, 3))
+    buf = np.empty(10)
     while j < n_t:
         dt_full = t[j] - t[j - 1]
         t_start = t[j - 1] + frac * dt_full
@@ -160,7 +201,7 @@ def propagate_nominal(t, dth, dv, j, frac, t_end, pos, vel, C, pnom, i_sg, i_sa,
             acc = 0.0
         interval_step(pos, vel, C, pnom, dth[j], dv[j], a, dt_s, i_sg, i_sa, gravity_model,
                       attitude_update, Fint[s], Qint[s, 0], Qint[s, 1], q_g, q_a, dyn_k, dthc,
-                      dvc, work, dynamics)
+                      dvc, work, dynamics, Cne, hv, Cbe)
         sub_dt[s] += dt_s
         acc += dt_s
         for i in range(3):
@@ -171,7 +212,10 @@ def propagate_nominal(t, dth, dv, j, frac, t_end, pos, vel, C, pnom, i_sg, i_sa,
                 rates[2, i] = dvc[i] / dt_s
         sum_dt += dt_s
         if full:
-            store_nav(nav_out, j, pos, vel, C)
+            if Cne is None:
+                store_nav(nav_out, j, pos, vel, C)
+            else:
+                store_nav_wander(nav_out, j, Cne, hv[0], vel, C, buf)
             out_seg[j] = seg_id
             j += 1
             frac = 0.0

@@ -192,11 +192,7 @@ class StrapdownModel(ProcessModelBase):
         perf = _time.perf_counter
         c0 = perf()
         pm = self.noise
-        self.j, self.frac, n_sub = kernels.propagate_nominal(
-            self.t, self.dth, self.dv, self.j, self.frac, t_end, self.pos, self.vel, self.C,
-            self.pnom, self.i_sg, self.i_sa, self.gmodel, self.aupd, self.sub_T, self.Fint,
-            self.Qint, self.sub_dt, pm.gyro_psd, pm.accel_psd, self.table, self.seg, node,
-            self.rates, pm.dyn_noise, self.dynamics)
+        self.j, self.frac, n_sub = self._propagate_nominal(t_end, node)
         dur = t_end - self.t_last
         if self.par_dyn is not None:
             # coupled blocks (a receiver clock: bias += drift dt) and decays, exactly
@@ -212,6 +208,16 @@ class StrapdownModel(ProcessModelBase):
         self.timing["mechanization"] += c1 - c0
         self.timing["covariance"] += perf() - c1
         return self.Phi, self.Qd
+
+    def _propagate_nominal(self, t_end: float, node: int):
+        """The compiled mechanization and F, Q accumulation up to ``t_end``:
+        ``(j, frac, n_sub)`` (:func:`.kernels.propagate_nominal`)."""
+        pm = self.noise
+        return kernels.propagate_nominal(
+            self.t, self.dth, self.dv, self.j, self.frac, t_end, self.pos, self.vel, self.C,
+            self.pnom, self.i_sg, self.i_sa, self.gmodel, self.aupd, self.sub_T, self.Fint,
+            self.Qint, self.sub_dt, pm.gyro_psd, pm.accel_psd, self.table, self.seg, node,
+            self.rates, pm.dyn_noise, self.dynamics)
 
     def advance_to(self, t_last: float) -> None:
         """The compiled high-rate path moved the nominal to its node at ``t_last``."""
