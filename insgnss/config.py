@@ -645,6 +645,10 @@ SCHEMA: dict[str, Any] = {
     "filter": {
         "process_model": _spec(str, "strapdown", "process model",
                                choices=["strapdown", "riss"]),
+        "frame": _spec(str, "enu", "navigation frame of the strapdown process model: local-level "
+                       "ENU, or wander azimuth with ECEF errors (valid over the poles; no "
+                       "high-rate path; docs/filter.md)", choices=["enu", "wander"],
+                       when=_is("filter.process_model", "strapdown")),
         "propagation_interval": _spec(_NUM, 0.1, "covariance propagation step [s] (shorter "
                                       "than an IMU interval: every sample)", check=POSITIVE),
         "epoch_interval": _spec(_NUM, 1.0, "filter epoch grid [s] (smoother storage per "

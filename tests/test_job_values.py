@@ -114,6 +114,7 @@ BAD_VALUES = [
     ({"inputs": {"control_points": {"path": "cp.csv", "std": 0.0}}}, "inputs.control_points.std"),
     # names and strings
     ({"filter": {"imu_grade": "bogus"}}, "filter.imu_grade"),
+    ({"filter": {"frame": "ned"}}, "filter.frame"),
     ({"outputs": {"formats": ["CSV"]}}, "outputs.formats"),
     ({"outputs": {"dir": ""}}, "outputs.dir"),
     (_inputs(reference={"path": "ref.pos", "q": [0]}), "inputs.reference.q"),
@@ -190,6 +191,7 @@ def test_extremes_inside_the_documented_ranges_are_accepted():
     ({"outages": {"periodic": {"stop_before_end": 10.0}}}, "outages.periodic.stop_before_end",
      "periodic"),
     ({"filter": {"nis_window": 0.0, "nis_bound": 10.0}}, "filter.nis_bound", "nis_window"),
+    ({"filter": {"process_model": "riss", "frame": "wander"}}, "filter.frame", "process_model"),
     ({"filter": {"imu_model": {"gyro_scale_ppm": 100.0}}}, "filter.imu_model.gyro_scale_ppm",
      "scale_factors"),
     ({"inputs": {"imu": {**IMU, "estimate_time_offset": True}}},

@@ -23,10 +23,11 @@ from .measurements import (
 )
 from .models import ExtraState, ProcessModel, StateLayout, error_dynamics, process_model
 from .smoother import rts_error_state
+from .wander_model import run_wander_filter
 
 __all__ = [
     "BIAS_COLS", "STD_COLS", "FilterConfig", "FilterResult", "run_filter",
     "BodyVelocity", "Cupt", "GnssPosition", "GnssVelocity", "Heading", "Measurement",
     "NominalState", "Zaru", "Zupt", "ExtraState", "ProcessModel", "StateLayout",
-    "error_dynamics", "process_model", "rts_error_state",
+    "error_dynamics", "process_model", "rts_error_state", "run_wander_filter",
 ]

@@ -88,9 +88,11 @@ class NominalState:
         return self.params[s.start - 9:s.stop - 9]
 
     def enu_offset(self, lat, lon, h) -> np.ndarray:
-        """ENU metres from the point (lat, lon, h) to the nominal position (local radii)."""
+        """ENU metres from the point (lat, lon, h) to the nominal position (local radii; the
+        longitude difference wrapped to (-pi, pi], so that a route across the antimeridian
+        sees metres, not the circumference)."""
         return np.array([
-            (self.lon - lon) * (self.N + self.height) * np.cos(self.lat),
+            wrap_pi(self.lon - lon) * (self.N + self.height) * np.cos(self.lat),
             (self.lat - lat) * (self.M + self.height),
             self.height - h,
         ])

@@ -30,9 +30,10 @@ lever arms, odometer scale, ...) are declared by the measurement models as
 model appends them to its layout, discretises them with the rest and feeds them back like any
 parameter state.
 
-Implementations: :class:`.strapdown_model.StrapdownModel` (LLF strapdown) and
-:class:`.riss_model.RissModel` (3D RISS). A wander-azimuth strapdown model implements the same
-calls (with its own nominal representation and output assembly).
+Implementations: :class:`.strapdown_model.StrapdownModel` (LLF strapdown),
+:class:`.wander_model.WanderModel` (wander-azimuth strapdown with an ECEF error state, valid over
+the poles; its own nominal representation, ``observe`` mapping and output assembly) and
+:class:`.riss_model.RissModel` (3D RISS).
 """
 
 from __future__ import annotations

@@ -34,7 +34,6 @@ of each row (east, north, up; roll, pitch, heading), the smoothed rows are corre
 
 from __future__ import annotations
 
-
 import numpy as np
 import pandas as pd
 from numba import njit

@@ -5,7 +5,9 @@ into a :class:`.JobResult` with the filter engine and a process model.
 process        what runs
 =============  ==============================================================================
 ``strapdown``  LLF strapdown error-state filter + RTS smoother
-               (:func:`insgnss.filter.engine.run_filter`) with the job's aiding
+               (:func:`insgnss.filter.engine.run_filter`) with the job's aiding;
+               ``[filter] frame = "wander"``: the wander-azimuth process model
+               (:func:`insgnss.filter.wander_model.run_wander_filter`, valid over the poles)
 ``riss``       the RISS process model (:func:`insgnss.filter.riss_model.run_riss_filter`):
                the same initialization, aiding, evaluation and summary, the odometer as the
                process input
@@ -119,7 +121,12 @@ def _strapdown_filter(ctx: RunContext, tuned: Tuned, smoother: bool = True):
         cfg.gate_recovery = None
     if job["inputs"]["imu"]["gap_noise"]:
         cfg.extra_noise = gap_noise(imu, ctx.imu_report["gaps"])  # bridged IMU gaps
-    res = run_filter(imu, init.state, aiding.models, cfg, progress=ctx.progress and smoother)
+    if job["filter"]["frame"] == "wander":
+        from ..filter.wander_model import run_wander_filter
+
+        res = run_wander_filter(imu, init.state, aiding.models, cfg)
+    else:
+        res = run_filter(imu, init.state, aiding.models, cfg, progress=ctx.progress and smoother)
     return res, init, aiding, imu
 
 
