@@ -223,11 +223,16 @@ def test_wander_filter_flies_over_the_pole_with_gnss(polar_run):
 
 
 def test_enu_filter_cannot_fly_over_the_pole(polar_run):
+    """The LLF filter on the same data: its transport rate and longitude rate blow up at the
+    pole passage (t = 225 s): 116 m forward, 1.5 km smoothed, GNSS rejected, NIS ~ 37 (before
+    the longitude-wrap fix of ``enu_offset`` it stopped on a runaway NIS, 7 km off)."""
     truth, _, enu = polar_run
-    est = enu.forward
-    err = np.linalg.norm(_ecef(est) - _ecef(truth.loc[est.index]), axis=1)
-    assert (not enu.complete) or np.nanmax(err) > 1e3
-    assert np.nanmax(err) > 1e3 or not np.all(np.isfinite(err))
+    if not enu.complete:
+        return
+    err = [np.linalg.norm(_ecef(est) - _ecef(truth.loc[est.index]), axis=1).max()
+           for est in (enu.forward, enu.smoothed)]
+    assert err[0] > 50.0 and err[1] > 500.0
+    assert (~enu.innovations["accepted"]).sum() > 0
 
 
 def test_job_key_frame_wander_runs_the_wander_model():

@@ -39,7 +39,8 @@ import pandas as pd
 from numba import njit
 
 from .. import earth
-from ..attitude import dcm_to_euler, euler_to_dcm, rotvec_to_dcm
+from ..attitude import dcm_to_euler_nb, euler_to_dcm_nb, rotvec_to_dcm_nb
+from ..earth import E2, A, ecef_to_geodetic, geodetic_to_ecef
 from ..errors import ConfigError
 from ..mechanization.wander import nav_state, wander_state
 from . import kernels
@@ -47,9 +48,6 @@ from .measurements import NominalState
 from .strapdown_model import StrapdownModel, levelling_covariance, output_columns
 
 __all__ = ["WanderModel", "WanderNominalState", "run_wander_filter"]
-
-#: output rows assembled at once (their interpolated covariances are held in memory)
-OUTPUT_CHUNK = 8192
 
 
 class WanderNominalState(NominalState):
@@ -65,29 +63,53 @@ class WanderNominalState(NominalState):
         return self.Cel @ (self.r_e - np.array(earth.geodetic_to_ecef(lat, lon, h)))
 
 
+@njit(cache=True)
+def _ecef_position_nb(Cne, h, r):
+    u0, u1, u2 = Cne[0, 2], Cne[1, 2], Cne[2, 2]
+    s2 = u2 * u2 / (u0 * u0 + u1 * u1 + u2 * u2)
+    N = A / np.sqrt(1.0 - E2 * s2)
+    r[0], r[1], r[2] = (N + h) * u0, (N + h) * u1, (N * (1.0 - E2) + h) * u2
+
+
 def ecef_position(Cne, h: float) -> np.ndarray:
     """ECEF position of a wander nominal from the normal ``u = C_w^e[:, 2]`` and the height
     (``r = ((N + h) u_x, (N + h) u_y, (N (1 - e^2) + h) u_z)``; no longitude needed)."""
-    u = Cne[:, 2]
-    _, N = earth.radii(np.arctan2(u[2], np.hypot(u[0], u[1])))
-    return np.array([(N + h) * u[0], (N + h) * u[1], (N * (1.0 - earth.E2) + h) * u[2]])
+    r = np.empty(3)
+    _ecef_position_nb(np.ascontiguousarray(Cne, dtype=float), float(h), r)
+    return r
 
 
-def _normal(lat, lon) -> np.ndarray:
+@njit(cache=True)
+def wander_feedback(Cne, hv, vel, C, pnom, x):
+    """Closed-loop correction of a wander nominal (``C_w^e``, height ``hv[0]``, ``v^w``,
+    ``C_b^w``, parameters) by the ECEF error estimate ``x``, in place: ``r^e -= dr``,
+    ``v^e -= dv``, ``C_b^e <- exp(-[phi x]) C_b^e``, ``p -= dp``; the frame is carried to the new
+    point by the smallest rotation of its vertical ``u`` (``C_w^e <- R(u -> u') C_w^e``)."""
+    r = np.empty(3)
+    _ecef_position_nb(Cne, hv[0], r)
+    lat, lon, h = ecef_to_geodetic(r[0] - x[0], r[1] - x[1], r[2] - x[2])
     cl = np.cos(lat)
-    return np.array([cl * np.cos(lon), cl * np.sin(lon), np.sin(lat)])
-
-
-def carry_frame(Cne, u_new) -> np.ndarray:
-    """``C_w^e`` moved to the point with normal ``u_new`` by the smallest rotation of its vertical
-    (``R(u -> u_new) C_w^e``); its third column becomes ``u_new``."""
-    u = Cne[:, 2]
-    k = np.cross(u, u_new)
-    s = np.linalg.norm(k)
-    if s == 0.0:
-        return Cne.copy()
-    R = rotvec_to_dcm(k / s * np.arctan2(s, float(u @ u_new)))
-    return R @ Cne
+    un = np.array([cl * np.cos(lon), cl * np.sin(lon), np.sin(lat)])
+    u = Cne[:, 2].copy()
+    ve = Cne @ vel.copy()
+    R = np.empty((3, 3))
+    phi = np.array([-x[6], -x[7], -x[8]])
+    rotvec_to_dcm_nb(phi, R)
+    Cbe = R @ (Cne @ C)
+    k = np.array([u[1] * un[2] - u[2] * un[1], u[2] * un[0] - u[0] * un[2],
+                  u[0] * un[1] - u[1] * un[0]])
+    s = np.sqrt(k[0] ** 2 + k[1] ** 2 + k[2] ** 2)
+    if s > 0.0:
+        k *= np.arctan2(s, u[0] * un[0] + u[1] * un[1] + u[2] * un[2]) / s
+        rotvec_to_dcm_nb(k, R)
+        Cn = R @ Cne
+        Cne[:, :] = Cn
+    hv[0] = h
+    for i in range(3):
+        vel[i] = Cne[0, i] * (ve[0] - x[3]) + Cne[1, i] * (ve[1] - x[4]) + Cne[2, i] * (ve[2] - x[5])
+    C[:, :] = Cne.T @ Cbe
+    for i in range(pnom.shape[0]):
+        pnom[i] -= x[9 + i]
 
 
 class WanderModel(StrapdownModel):
@@ -204,17 +226,7 @@ class WanderModel(StrapdownModel):
         return z, H, R
 
     def feedback(self, x: np.ndarray) -> None:
-        Cne = self.Cne
-        r = ecef_position(Cne, self.hv[0]) - x[0:3]
-        lat, lon, h = earth.ecef_to_geodetic(r[0], r[1], r[2])
-        v_e = Cne @ self.vel - x[3:6]
-        C_be = rotvec_to_dcm(-x[6:9]) @ (Cne @ self.C)
-        Cn = carry_frame(Cne, _normal(lat, lon))
-        self.Cne[:] = Cn
-        self.hv[0] = h
-        self.vel[:] = Cn.T @ v_e
-        self.C[:] = Cn.T @ C_be
-        self.pnom -= x[9:]
+        wander_feedback(self.Cne, self.hv, self.vel, self.C, self.pnom, np.ascontiguousarray(x))
         self._update_pos()
         self._nav_time = None
 
@@ -235,14 +247,15 @@ class WanderModel(StrapdownModel):
         out = np.full((n_rows, len(cols)), np.nan)
         if n_rows:
             if smoothed is None:  # forward: P(e|e) at the start, P(e|e-1) at the end
-                P0, P1, X0, X1 = store.Pf[:n_nodes], store.Pp[:n_nodes], None, None
+                P0, P1 = store.Pf[:n_nodes], store.Pp[:n_nodes]
+                X0 = X1 = np.zeros((1, self.layout.n))  # unused
             else:
                 X0, X1, Ps, _ = smoothed
                 P0 = P1 = store.Pf[:n_nodes] if Ps is None else Ps
-            for r0 in range(0, n_rows, OUTPUT_CHUNK):  # bounded memory: (rows, n, n) blocks
-                r = slice(r0, min(r0 + OUTPUT_CHUNK, n_rows))
-                _wander_output(t[r], self.table[r], self.seg[r], self.post[r], store.t[:n_nodes],
-                               P0, P1, X0, X1, store.par[:n_nodes], out[r])
+            _wander_output(t, self.table, self.seg, self.post, store.t[:n_nodes],
+                           np.ascontiguousarray(P0), np.ascontiguousarray(P1),
+                           np.ascontiguousarray(X0), np.ascontiguousarray(X1),
+                           store.par[:n_nodes], smoothed is not None, out)
             if smoothed is not None and smoothed[2] is None:
                 out[:, 9:18] = np.nan
                 out[:, 18 + self.n_par:] = np.nan
@@ -259,55 +272,94 @@ class WanderModel(StrapdownModel):
 
 
 @njit(cache=True)
-def _euler_std_rows(C, Pa, out):
-    J = np.empty((3, 3))
-    for j in range(C.shape[0]):
-        kernels._euler_std(C[j], Pa[j], J, out[j])
+def _enu_rows(lat, lon, out):
+    """``C_e^l`` (rows east, north, up in ECEF) at (lat, lon) into ``out``."""
+    sl, cl, so, co = np.sin(lat), np.cos(lat), np.sin(lon), np.cos(lon)
+    out[0, 0], out[0, 1], out[0, 2] = -so, co, 0.0
+    out[1, 0], out[1, 1], out[1, 2] = -sl * co, -sl * so, cl
+    out[2, 0], out[2, 1], out[2, 2] = cl * co, cl * so, sl
 
 
-def _wander_output(t, nav, seg, post, ep_t, P0, P1, X0, X1, par, out):
-    """Vectorised row assembly of :meth:`WanderModel.output` (``X0 = None``: forward, no
-    correction): row ``j`` in segment ``e = seg[j]`` takes node ``e`` if ``post[j]``, else the
-    linear interpolation between node ``e-1`` (``X0, P0``) and node ``e`` (``X1, P1``)."""
+@njit(cache=True)
+def _wander_output(t, nav, seg, post, ep_t, P0, P1, X0, X1, par, correct, out):
+    """Row assembly of :meth:`WanderModel.output` (compiled): row ``j`` in segment
+    ``e = seg[j]`` takes node ``e`` if ``post[j]``, else the linear interpolation between node
+    ``e-1`` (``X0, P0``) and node ``e`` (``X1, P1``); ``correct``: subtract the (ECEF) error
+    from the nominal (smoothed rows). The stds are those of the covariance rotated into the
+    row's ENU axes."""
     n = P0.shape[1]
     npar = n - 9
-    e = seg.astype(np.int64)
-    a = np.where(post, e, e - 1)
-    w = np.where(post, 0.0, (t - ep_t[a]) / np.where(post, 1.0, ep_t[e] - ep_t[a]))
-    P = (1.0 - w)[:, None, None] * P0[a] + w[:, None, None] * P1[e]
-    x = None
-    if X0 is not None:
-        x = (1.0 - w)[:, None] * X0[a] + w[:, None] * X1[e]
-    lat, lon, h = nav[:, 0], nav[:, 1], nav[:, 2]
-    Cle = earth.enu_to_ecef_dcm(lat, lon)
-    Cbl = euler_to_dcm(nav[:, 6], nav[:, 7], nav[:, 8])
-    if x is None:
-        out[:, 0:9] = nav[:, 0:9]
-    else:
-        r = np.column_stack(earth.geodetic_to_ecef(lat, lon, h)) - x[:, 0:3]
-        lat, lon, h = earth.ecef_to_geodetic(r[:, 0], r[:, 1], r[:, 2])
-        v_e = np.einsum("kij,kj->ki", Cle, nav[:, 3:6]) - x[:, 3:6]
-        C_be = rotvec_to_dcm(-x[:, 6:9]) @ Cle @ Cbl
-        Cle = earth.enu_to_ecef_dcm(lat, lon)
-        Cel = np.swapaxes(Cle, 1, 2)
-        Cbl = Cel @ C_be
-        out[:, 0], out[:, 1], out[:, 2] = lat, lon, h
-        out[:, 3:6] = np.einsum("kij,kj->ki", Cel, v_e)
-        r_, p_, a_ = dcm_to_euler(Cbl)
-        out[:, 6], out[:, 7], out[:, 8] = r_, p_, a_
-    Cel = np.swapaxes(Cle, 1, 2)
-    for k in range(2):  # position, velocity
-        s = slice(3 * k, 3 * k + 3)
-        Pk = Cel @ P[:, s, s] @ Cle
-        out[:, 9 + 3 * k:12 + 3 * k] = np.sqrt(np.maximum(np.diagonal(Pk, axis1=1, axis2=2), 0.0))
-    Pa = np.ascontiguousarray(Cel @ P[:, 6:9, 6:9] @ Cle)
-    es = np.empty((len(t), 3))
-    _euler_std_rows(np.ascontiguousarray(Cbl), Pa, es)
-    out[:, 15:18] = es
-    pd_ = np.sqrt(np.maximum(np.diagonal(P[:, 9:, 9:], axis1=1, axis2=2), 0.0))
-    pnom = par[a]
-    out[:, 18:18 + npar] = pnom - (x[:, 9:] if x is not None else 0.0)
-    out[:, 18 + npar:] = pd_
+    x = np.zeros(n)
+    Cel = np.empty((3, 3))
+    Cbl = np.empty((3, 3))
+    Cbe = np.empty((3, 3))
+    R = np.empty((3, 3))
+    Pb = np.empty((3, 3))
+    Pa = np.empty((3, 3))
+    J = np.empty((3, 3))
+    es = np.empty(3)
+    phi = np.empty(3)
+    ve = np.empty(3)
+    for j in range(t.shape[0]):
+        e = seg[j]
+        if post[j]:
+            a, w = e, 0.0
+        else:
+            a = e - 1
+            w = (t[j] - ep_t[a]) / (ep_t[e] - ep_t[a])
+        if correct:
+            for i in range(n):
+                x[i] = (1.0 - w) * X0[a, i] + w * X1[e, i]
+        lat, lon, h = nav[j, 0], nav[j, 1], nav[j, 2]
+        _enu_rows(lat, lon, Cel)
+        euler_to_dcm_nb(nav[j, 6], nav[j, 7], nav[j, 8], Cbl)
+        if correct:
+            r0, r1, r2 = geodetic_to_ecef(lat, lon, h)
+            for i in range(3):  # v^e = C_l^e v^l - dv
+                ve[i] = (Cel[0, i] * nav[j, 3] + Cel[1, i] * nav[j, 4] + Cel[2, i] * nav[j, 5]
+                         - x[3 + i])
+            for r in range(3):  # C_b^e = C_l^e C_b^l
+                for c in range(3):
+                    Cbe[r, c] = Cel[0, r] * Cbl[0, c] + Cel[1, r] * Cbl[1, c] + Cel[2, r] * Cbl[2, c]
+            phi[0], phi[1], phi[2] = -x[6], -x[7], -x[8]
+            rotvec_to_dcm_nb(phi, R)
+            lat, lon, h = ecef_to_geodetic(r0 - x[0], r1 - x[1], r2 - x[2])
+            _enu_rows(lat, lon, Cel)
+            for r in range(3):  # C_b^l = C_e^l exp(-[phi x]) C_b^e
+                for c in range(3):
+                    Pb[r, c] = R[r, 0] * Cbe[0, c] + R[r, 1] * Cbe[1, c] + R[r, 2] * Cbe[2, c]
+            for r in range(3):
+                for c in range(3):
+                    Cbl[r, c] = Cel[r, 0] * Pb[0, c] + Cel[r, 1] * Pb[1, c] + Cel[r, 2] * Pb[2, c]
+            out[j, 0], out[j, 1], out[j, 2] = lat, lon, h
+            for i in range(3):
+                out[j, 3 + i] = Cel[i, 0] * ve[0] + Cel[i, 1] * ve[1] + Cel[i, 2] * ve[2]
+            out[j, 6], out[j, 7], out[j, 8] = dcm_to_euler_nb(Cbl)
+        else:
+            for i in range(9):
+                out[j, i] = nav[j, i]
+        for blk in range(3):  # C_e^l P_blk C_l^e
+            o = 3 * blk
+            for r in range(3):
+                for c in range(3):
+                    Pb[r, c] = (1.0 - w) * P0[a, o + r, o + c] + w * P1[e, o + r, o + c]
+            for r in range(3):
+                for c in range(3):
+                    v = 0.0
+                    for k in range(3):
+                        for m in range(3):
+                            v += Cel[r, k] * Pb[k, m] * Cel[c, m]
+                    Pa[r, c] = v
+            if blk < 2:
+                for r in range(3):
+                    out[j, 9 + o + r] = np.sqrt(max(Pa[r, r], 0.0))
+        kernels._euler_std(Cbl, Pa, J, es)
+        for i in range(3):
+            out[j, 15 + i] = es[i]
+        for i in range(npar):
+            out[j, 18 + i] = par[a, i] - x[9 + i]
+            v = (1.0 - w) * P0[a, 9 + i, 9 + i] + w * P1[e, 9 + i, 9 + i]
+            out[j, 18 + npar + i] = np.sqrt(max(v, 0.0))
 
 
 def run_wander_filter(imu: pd.DataFrame, initial, measurements, config=None):
