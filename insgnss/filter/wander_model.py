@@ -130,22 +130,18 @@ class WanderModel(StrapdownModel):
         self.hv = np.array([h])
         self.vel = np.ascontiguousarray(vel)
         self.C = np.ascontiguousarray(C)
-        self._buf = np.empty(10)
+        self._buf = np.empty(10)  # the nominal's ENU row plus the wander angle
+        self._row = np.empty((1, 9))
         self._nav = WanderNominalState()
         self._nav.layout = self.layout
         self._nav.gyro_psd = self.noise.gyro_psd
         self._update_pos()
 
     def _update_pos(self):
-        """lat, lon, h of the nominal into ``self.pos`` (for output and the nominal)."""
+        """The nominal's ENU row and wander angle into ``self._buf``, its lat, lon, h into
+        ``self.pos``."""
         kernels.store_nav_wander(self._row, 0, self.Cne, self.hv[0], self.vel, self.C, self._buf)
         self.pos[:] = self._buf[0:3]
-
-    @property
-    def _row(self):
-        if not hasattr(self, "_row_buf"):
-            self._row_buf = np.empty((1, 9))
-        return self._row_buf
 
     def _store(self, j):
         kernels.store_nav_wander(self.table, j, self.Cne, self.hv[0], self.vel, self.C, self._buf)
