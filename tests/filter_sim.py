@@ -21,7 +21,7 @@ from scipy.signal import lfilter
 
 from insgnss.attitude import attitude_error, euler_to_dcm, rotvec_to_dcm
 from insgnss.earth import enu_displacement_to_geodetic, radii
-from insgnss.imu import ImuErrorModel, increments, increments_table
+from insgnss.imu import ImuErrorModel, grade, increments, increments_table
 from insgnss.mechanization.inverse import inverse_mechanize
 from insgnss.mechanization.strapdown import NAV_COLS, NavState
 from insgnss.simulate.aiding import simulate_gnss
@@ -214,3 +214,39 @@ def error_vector_at(est_row_times, errors: pd.DataFrame) -> np.ndarray:
     """(E, 9) error vectors (dr, dv, phi) at the given times."""
     e = errors.loc[est_row_times]
     return e[["east", "north", "up", "vel_e", "vel_n", "vel_u", "phi_e", "phi_n", "phi_u"]].to_numpy()
+
+
+def polar_flight(rng: np.random.Generator, imu_grade: str = "tactical"):
+    """The over-the-pole flight of issue 17 with sensors and GNSS: 250 m/s, 1 km, from 89.5 N on
+    lon 0 over the pole (within 1 m of it) to lon 180, 450 s at 100 Hz; IMU of ``imu_grade``
+    (the errors the filter models), GNSS positions at 1 Hz with 1 m / 2 m white noise drawn in
+    ECEF (exact next to the pole), initial errors of 2 m, 0.1 m/s, 0.1-0.6 deg.
+
+    Returns ``(truth, imu, gnss, initial, config)``."""
+    import insgnss.earth as earth
+    from insgnss.filter.engine import FilterConfig
+
+    D = np.pi / 180.0
+    truth = generate(rate=100.0, lat=89.5 * D, lon=0.0, height=1000.0, heading=0.0,
+                     speed=250.0, vehicle="aircraft",
+                     segments=[{"type": "hold", "duration": 450.0}], frame="wander").truth
+    model = grade(imu_grade) if isinstance(imu_grade, str) else imu_grade
+    sim = simulate_imu(inverse_mechanize(truth, frame="wander"), filter_model_errors(model), rng)
+    tr = truth.iloc[::100]
+    noise = rng.standard_normal((len(tr), 3)) * [1.0, 1.0, 2.0]
+    r = np.column_stack(earth.geodetic_to_ecef(tr["lat"].to_numpy(), tr["lon"].to_numpy(),
+                                               tr["height"].to_numpy()))
+    r += np.einsum("kij,kj->ki", earth.enu_to_ecef_dcm(tr["lat"], tr["lon"]), noise)
+    la, lo, hh = earth.ecef_to_geodetic(r[:, 0], r[:, 1], r[:, 2])
+    gnss = pd.DataFrame({"lat": la, "lon": lo, "height": hh, "east_std": 1.0,
+                         "north_std": 1.0, "up_std": 2.0}, index=tr.index)
+    r0 = truth.iloc[0]
+    C0 = rotvec_to_dcm(np.array([0.002, -0.002, 0.01])) @ euler_to_dcm(
+        r0["roll"], r0["pitch"], r0["heading"])
+    x0 = NavState(r0["lat"] + 2.0 / 6.4e6, r0["lon"], r0["height"] - 1.5,
+                  r0[["vel_e", "vel_n", "vel_u"]].to_numpy(float) + [0.1, -0.05, 0.05], C0,
+                  float(truth.index[0]))
+    x0.wander_angle = float(r0["wander_angle"])
+    cfg = FilterConfig(imu_model=model, initial_pos_std=3.0, initial_vel_std=0.2,
+                       initial_att_std=(0.005, 0.005, 0.02))
+    return truth, sim.imu, gnss, x0, cfg

@@ -3,15 +3,14 @@ Jacobian (also at the pole), agreement with the LLF filter where both run, feedb
 pole, and the filter over the pole with GNSS positions where the ENU filter cannot run."""
 
 import numpy as np
-import pandas as pd
 import pytest
 from filter_sim import (
     car_truth,
     corrupt_imu,
-    filter_model_errors,
     gnss_from_truth,
     nav_errors,
     perturbed_initial,
+    polar_flight,
 )
 from scipy.linalg import expm
 
@@ -34,11 +33,8 @@ from insgnss.filter import FilterConfig, GnssPosition, GnssVelocity, StateLayout
 from insgnss.filter.ecef_dynamics import ecef_error_dynamics
 from insgnss.filter.wander_model import WanderModel, ecef_position, run_wander_filter
 from insgnss.imu import grade, increments_table
-from insgnss.mechanization.inverse import inverse_mechanize
 from insgnss.mechanization.strapdown import NavState
 from insgnss.mechanization.wander import wander_state
-from insgnss.simulate.sensors import simulate_imu
-from insgnss.simulate.trajectory import generate
 
 D = np.pi / 180.0
 W = np.array([0.0, 0.0, OMEGA_E])
@@ -161,33 +157,11 @@ def _ecef(df):
 
 @pytest.fixture(scope="module")
 def polar_run():
-    """The issue's route: 250 m/s, 1 km, 89.5 N on lon 0 -> pole -> 89.5 N on lon 180, 450 s,
-    100 Hz; tactical IMU (turn-on bias, instability, ARW/VRW), GNSS positions at 1 Hz with
-    1 m / 2 m white noise (drawn in ECEF: exact next to the pole), initial errors of 2 m,
-    0.1 m/s, 0.1-0.6 deg."""
-    truth = generate(rate=100.0, lat=89.5 * D, lon=0.0, height=1000.0, heading=0.0,
-                     speed=250.0, vehicle="aircraft",
-                     segments=[{"type": "hold", "duration": 450.0}], frame="wander").truth
-    rng = np.random.default_rng(7)
-    sim = simulate_imu(inverse_mechanize(truth, frame="wander"),
-                       filter_model_errors(grade("tactical")), rng)
-    tr = truth.iloc[::100]
-    noise = rng.standard_normal((len(tr), 3)) * [1.0, 1.0, 2.0]
-    r = _ecef(tr) + np.einsum("kij,kj->ki", enu_to_ecef_dcm(tr["lat"], tr["lon"]), noise)
-    la, lo, hh = ecef_to_geodetic(r[:, 0], r[:, 1], r[:, 2])
-    gnss = pd.DataFrame({"lat": la, "lon": lo, "height": hh, "east_std": 1.0,
-                         "north_std": 1.0, "up_std": 2.0}, index=tr.index)
-    r0 = truth.iloc[0]
-    C0 = rotvec_to_dcm(np.array([0.002, -0.002, 0.01])) @ euler_to_dcm(
-        r0["roll"], r0["pitch"], r0["heading"])
-    x0 = NavState(r0["lat"] + 2.0 / 6.4e6, r0["lon"], r0["height"] - 1.5,
-                  r0[["vel_e", "vel_n", "vel_u"]].to_numpy(float) + [0.1, -0.05, 0.05], C0,
-                  float(truth.index[0]))
-    x0.wander_angle = float(r0["wander_angle"])
-    cfg = FilterConfig(imu_model="tactical", initial_pos_std=3.0, initial_vel_std=0.2,
-                       initial_att_std=(0.005, 0.005, 0.02))
-    res = run_wander_filter(sim.imu, x0, [GnssPosition(gnss)], cfg)
-    enu = run_filter(sim.imu, x0, [GnssPosition(gnss)], cfg)
+    """The issue's route with a tactical IMU and 1 Hz GNSS positions
+    (:func:`filter_sim.polar_flight`), through the wander and the ENU filter."""
+    truth, imu, gnss, x0, cfg = polar_flight(np.random.default_rng(7))
+    res = run_wander_filter(imu, x0, [GnssPosition(gnss)], cfg)
+    enu = run_filter(imu, x0, [GnssPosition(gnss)], cfg)
     return truth, res, enu
 
 
