@@ -3,6 +3,7 @@ Jacobian (also at the pole), agreement with the LLF filter where both run, feedb
 pole, and the filter over the pole with GNSS positions where the ENU filter cannot run."""
 
 import numpy as np
+import pandas as pd
 import pytest
 from filter_sim import (
     car_truth,
@@ -160,6 +161,9 @@ def test_wander_model_feedback_across_the_pole():
     assert np.degrees(m.pos[0]) > 89.99997 and abs(m.pos[1] - 0.4) > 3.0  # over the pole
     with pytest.raises(ConfigError, match="high-rate"):
         run_wander_filter(imu, x0, [Zupt(t, high_rate=True)], FilterConfig(imu_model="tactical"))
+    xn = pd.DataFrame({"pos_std": [0.1], "up_std": [0.2]}, index=[0.01])
+    with pytest.raises(ConfigError, match="up_std"):
+        run_wander_filter(imu, x0, [Zupt(t)], FilterConfig(imu_model="tactical", extra_noise=xn))
 
 
 # --- over the pole ------------------------------------------------------------------------------

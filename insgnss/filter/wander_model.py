@@ -362,12 +362,19 @@ def run_wander_filter(imu: pd.DataFrame, initial, measurements, config=None):
     """:func:`insgnss.filter.engine.run_filter` with the wander-azimuth process model
     (:class:`WanderModel`): the same inputs, configuration and result, valid over the poles.
 
-    Measurement models with ``high_rate=True`` are not supported (no compiled high-rate path).
+    Measurement models with ``high_rate=True`` are not supported (no compiled high-rate path),
+    nor ``config.extra_noise`` with a vertical-only ``up_std`` (isotropic stds are).
     """
     from .engine import FilterConfig, run_engine
 
     config = FilterConfig() if config is None else config
     config.validate()
+    xn = config.extra_noise
+    if xn is not None and "up_std" in xn and np.any(np.asarray(xn["up_std"], float) != 0.0):
+        # the engine adds it to the third position state: "up" in ENU, the polar axis here
+        raise ConfigError("extra_noise up_std (vertical-only position noise) is not supported "
+                          "by the wander-azimuth model (ECEF errors); use pos_std",
+                          column="extra_noise.up_std")
     measurements = list(measurements)
     extras = []
     for m in measurements:
