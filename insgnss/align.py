@@ -153,16 +153,19 @@ def check_static(f: np.ndarray, w: np.ndarray, g: float, model: ImuErrorModel | 
     norm = np.linalg.norm(f, axis=1)
     noise = 0.0 if model is None else model.accel_vrw / np.sqrt(dt)
     lim_f = max_accel_std if max_accel_std is not None else 0.05 + 5.0 * noise
-    if abs(norm.mean() - g) > 0.05 * g:
-        raise AlignmentError(
-            f"mean specific-force norm {norm.mean():.3f} m/s^2 is not gravity ({g:.3f} m/s^2): "
-            "not static or accelerometer units wrong", expected="|f| ~ g", found=f"{norm.mean():.3f}")
+    # motion first: a window that reaches into motion also has a mean norm away from g, and
+    # blaming the units for it would send the user to the wrong fix
     fstd = float(np.sqrt(np.sum(np.var(f, axis=0))))
     if fstd > lim_f:
         raise AlignmentError(
             f"the alignment window starting at t={t0:.3f} s is not static: the specific force "
             f"varies by {fstd:.3f} m/s^2 (1-sigma)",
             expected=f"<= {lim_f:.3f} m/s^2", found=f"{fstd:.3f} m/s^2")
+    if abs(norm.mean() - g) > 0.05 * g:
+        raise AlignmentError(
+            f"mean specific-force norm {norm.mean():.3f} m/s^2 is not gravity ({g:.3f} m/s^2) "
+            "although the window is still: accelerometer units wrong (g declared as m/s^2, or "
+            "increments declared as rates?)", expected="|f| ~ g", found=f"{norm.mean():.3f}")
     gyro_noise = 0.0 if model is None else model.gyro_arw / np.sqrt(dt)
     lim_w = max_rate if max_rate is not None else max(np.radians(1.0), 5.0 * gyro_noise)
     wstd = float(np.sqrt(np.sum(np.var(w, axis=0))))

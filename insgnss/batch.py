@@ -18,6 +18,9 @@ Per job the worker writes the usual outputs (trajectories, logs, summary, report
 when the job raised), the error, IMU samples and span, the initialization, the measurement and
 rejection counts, the timing and, with a reference, the evaluation metrics of the forward and
 smoothed solutions (docs/jobs.md). A failed job is reported and does not stop the others.
+Files that are not jobs to run are skipped with a one-line reason (:func:`skip_reason`,
+status ``skipped``): settings-only files (for ``--settings``) and jobs whose data is not
+present, so ``insgnss batch 'scenarios/*.toml'`` runs what it can.
 The table is written as ``batch.csv`` and ``batch.parquet`` plus ``batch.json`` (failures with
 tracebacks, back-end, timing); every file atomically.
 """
@@ -84,6 +87,28 @@ def _read_toml(path: Path) -> dict:
         raise ConfigError("job file not found", file=path) from None
     except tomllib.TOMLDecodeError as exc:
         raise ConfigError(f"not valid TOML: {exc}", file=path) from None
+
+
+def skip_reason(path: Path, data: dict | None, base: dict | None) -> str | None:
+    """Why a matched file is not a job to run (None when it is): a settings-only file (no
+    ``[inputs.imu] path`` and no simulation ``[scenario]``; meant for ``--settings``), or a
+    job whose input files are not present (e.g. a bundled real-data job without the data).
+    A file that cannot be read or validated is not skipped: its work unit reports it."""
+    if data is None:
+        return None
+    merged = merge_settings(base, data) if base else data
+    try:
+        job = load_job_dict(merged, path)
+    except ConfigError:
+        return None
+    if not job.simulation and job["inputs"]["imu"]["path"] is None:
+        return ("settings only (no [inputs.imu] path and no [scenario]): use it with "
+                "--settings")
+    missing = [p for p in job.input_paths() if not p.exists()]
+    if missing:
+        more = f" and {len(missing) - 1} more" if len(missing) > 1 else ""
+        return f"data not present: {missing[0]}{more}"
+    return None
 
 
 def _label(path: Path, data: dict) -> str:
@@ -206,16 +231,23 @@ def run_batch(patterns: list[str] | tuple[str, ...], *, settings: str | Path | d
         except ConfigError:
             datas.append(None)
     names = _unique_names(files, datas)
+    skipped = {f: r for f, d in zip(files, datas, strict=True)
+               if (r := skip_reason(f, d, base)) is not None}
+    run_files = [f for f in files if f not in skipped]
+    run_names = [n for f, n in zip(files, names, strict=True) if f not in skipped]
     out = Path(out_dir) if out_dir is not None else None
     tasks = [(str(f), base, None if out is None else str(out / n), write_outputs, report)
-             for f, n in zip(files, names, strict=True)]
+             for f, n in zip(run_files, run_names, strict=True)]
     ex = executor if executor is not None else InProcess()
     t0 = _time.perf_counter()
-    outcomes = ex.run(run_batch_job, tasks, labels=[str(f) for f in files], progress=progress,
-                      desc="batch")
+    outcomes = ex.run(run_batch_job, tasks, labels=[str(f) for f in run_files],
+                      progress=progress, desc="batch") if tasks else []
     elapsed = _time.perf_counter() - t0
     rows, failures = [], []
-    for o, f, n in zip(outcomes, files, names, strict=True):
+    for f, n in zip(files, names, strict=True):
+        if f in skipped:
+            rows.append({"job": n, "file": str(f), "status": "skipped", "error": skipped[f]})
+    for o, f, n in zip(outcomes, run_files, run_names, strict=True):
         if o.ok:
             rows.append(o.value)
         else:
@@ -228,6 +260,7 @@ def run_batch(patterns: list[str] | tuple[str, ...], *, settings: str | Path | d
                "patterns": list(patterns), "unmatched_patterns": empty, "settings": base_name,
                "jobs": len(files), "ok": counts.get("ok", 0),
                "incomplete": counts.get("incomplete", 0), "failed": counts.get("failed", 0),
+               "skipped": [{"file": str(f), "reason": r} for f, r in skipped.items()],
                "executor": ex.describe(), "elapsed_s": elapsed,
                "jobs_per_minute": 60.0 * len(files) / elapsed if elapsed > 0 else None}
     return BatchResult(table, failures, summary)

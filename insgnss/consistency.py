@@ -71,10 +71,13 @@ def solution_errors(sol: pd.DataFrame, truth: pd.DataFrame, times: np.ndarray
     deul = wrap_angle(eul_s - eul_t)
     err = np.column_stack([de, dn, du, np.hypot(de, dn), dv, deul])
     sig = np.empty_like(err)
+
+    def std(col):  # NaN for a solution without that sigma (e.g. a smoothed foot-mounted track)
+        return s[col].to_numpy(float) if col in s.columns else np.full(len(s), np.nan)
+
     for q, name in enumerate(ERROR_QUANTITIES):
         col = STD_OF[name]
-        sig[:, q] = np.hypot(s["east_std"].to_numpy(float), s["north_std"].to_numpy(float)) \
-            if col is None else s[col].to_numpy(float)
+        sig[:, q] = np.hypot(std("east_std"), std("north_std")) if col is None else std(col)
     phi = attitude_error(euler_to_dcm(*eul_s.T), euler_to_dcm(*eul_t.T))
     x = np.column_stack([de, dn, du, dv, phi.reshape(-1, 3)])
     return err, sig, x

@@ -98,7 +98,15 @@ def campaign(tmp_path_factory):
         (root / "jobs").mkdir(exist_ok=True)
         (root / "jobs" / f"log{k}.toml").write_text(JOB.format(name=f"drive{k}",
                                                                folder=f"../log{k}"))
-    (root / "jobs" / "broken.toml").write_text(JOB.format(name="broken", folder="../nowhere"))
+    # a job whose IMU file is not a table (it fails), one whose data is not present and a
+    # settings-only file (both skipped with a note)
+    (root / "broken").mkdir()
+    (root / "broken" / "imu.csv").write_text("time,gyro_x\nnot a number,1\n")
+    (root / "broken" / "gnss.csv").write_text((root / "log0" / "gnss.csv").read_text())
+    (root / "broken" / "truth.csv").write_text((root / "log0" / "truth.csv").read_text())
+    (root / "jobs" / "broken.toml").write_text(JOB.format(name="broken", folder="../broken"))
+    (root / "jobs" / "missing.toml").write_text(JOB.format(name="missing", folder="../nowhere"))
+    (root / "jobs" / "settings_only.toml").write_text("[filter]\nsmoother = false\n")
     (root / "lab.toml").write_text(BASE)
     return root
 
@@ -107,7 +115,8 @@ def test_expand_and_merge(campaign):
     files, empty = expand_jobs([str(campaign / "jobs" / "*.toml"), str(campaign / "jobs" /
                                                                       "log0.toml"),
                                 str(campaign / "none*" / "*.toml")])
-    assert [f.name for f in files] == ["broken.toml", "log0.toml", "log1.toml"]  # unique, sorted
+    assert [f.name for f in files] == ["broken.toml", "log0.toml", "log1.toml",  # unique, sorted
+                                       "missing.toml", "settings_only.toml"]
     assert empty == [str(campaign / "none*" / "*.toml")]
     m = merge_settings({"filter": {"bias_model": "random_walk", "smoother": True}, "a": 1},
                        {"filter": {"smoother": False}, "b": 2})
@@ -122,9 +131,16 @@ def test_batch_summary_table_and_failure(campaign, tmp_path):
                     out_dir=out)
     t = res.table.set_index("job")
     assert list(res.table.columns) == COLUMNS
-    assert list(t.index) == ["broken", "drive0", "drive1"]
-    assert list(t["status"]) == ["failed", "ok", "ok"]
-    assert "nowhere" in t.loc["broken", "error"]                 # names the missing file
+    assert list(t.index) == ["missing", "settings_only", "broken", "drive0", "drive1"]
+    assert list(t["status"]) == ["skipped", "skipped", "failed", "ok", "ok"]
+    # skipped with a one-line reason naming the missing file / what the file is for
+    assert t.loc["missing", "error"].startswith("data not present: ")
+    assert "nowhere" in t.loc["missing", "error"] and "imu.csv" in t.loc["missing", "error"]
+    assert "settings only" in t.loc["settings_only", "error"]
+    assert "--settings" in t.loc["settings_only", "error"]
+    assert [k["file"].rsplit("/", 1)[1] for k in res.summary["skipped"]] == [
+        "missing.toml", "settings_only.toml"]
+    assert "imu.csv" in t.loc["broken", "error"]                 # names the bad file
     assert res.failures[0]["job"] == "broken" and res.failures[0]["traceback"]
     for name in ("drive0", "drive1"):
         r = t.loc[name]
@@ -140,15 +156,16 @@ def test_batch_summary_table_and_failure(campaign, tmp_path):
     assert t.loc["drive0", "forward_rms_h_m"] != t.loc["drive1", "forward_rms_h_m"]
     paths = res.write(out)
     table = pd.read_csv(paths["csv"])
-    assert list(table["status"]) == ["failed", "ok", "ok"]
+    assert list(table["status"]) == ["skipped", "skipped", "failed", "ok", "ok"]
     pd.testing.assert_frame_equal(pd.read_parquet(paths["parquet"]), res.table,
                                   check_dtype=False)
     summary = json.loads(paths["json"].read_text())
-    assert (summary["jobs"], summary["ok"], summary["failed"]) == (3, 2, 1)
+    assert (summary["jobs"], summary["ok"], summary["failed"]) == (5, 2, 1)
+    assert len(summary["skipped"]) == 2
     assert summary["failures"][0]["file"].endswith("broken.toml")
 
 
-def test_batch_cli_with_a_job_overriding_the_settings(campaign, tmp_path):
+def test_batch_cli_with_a_job_overriding_the_settings(campaign, tmp_path, capsys):
     # a job file that sets its own outage instead of the lab's
     own = campaign / "jobs" / "log0.toml"
     special = tmp_path / "special.toml"
@@ -169,3 +186,14 @@ def test_batch_cli_with_a_job_overriding_the_settings(campaign, tmp_path):
                      str(campaign / "lab.toml"), "-o", str(out), "--summary-only",
                      "--no-progress"]) == 3
     assert np.isnan(pd.read_csv(out / "batch.csv").set_index("job").loc["broken", "imu_samples"])
+    # skipped files are not failures: exit status 0, one line each
+    capsys.readouterr()
+    code = cli_main(["batch", str(campaign / "jobs" / "log1.toml"),
+                     str(campaign / "jobs" / "missing.toml"),
+                     str(campaign / "jobs" / "settings_only.toml"), "--settings",
+                     str(campaign / "lab.toml"), "-o", str(out), "--summary-only",
+                     "--no-progress"])
+    assert code == 0
+    lines = capsys.readouterr().out.splitlines()
+    notes = [x for x in lines if x.startswith("skipped ")]
+    assert len(notes) == 2 and "missing.toml: data not present" in notes[0]

@@ -11,7 +11,9 @@ Examples:
   insgnss batch "campaign/*.toml" --settings lab_defaults.toml -o out/campaign --workers 2
   insgnss batch "campaign/**/job.toml" --scheduler tcp://head:8786 -o /shared/out/campaign
 
-Exit status: 0 every job ok, 3 some jobs failed or stopped early, 2 bad arguments.
+Settings-only files and jobs whose data is not present are skipped with a one-line note.
+
+Exit status: 0 every job that ran is ok, 3 some jobs failed or stopped early, 2 bad arguments.
 """
 
 from __future__ import annotations
@@ -59,9 +61,11 @@ def run(args: argparse.Namespace) -> int:
     with pd.option_context("display.width", 160, "display.max_columns", 20,
                            "display.float_format", "{:.3f}".format):
         print(res.table[cols].to_string(index=False))
+    for k in s["skipped"]:
+        print(f"skipped {k['file']}: {k['reason']}")
     for f in res.failures:
         print(f"FAILED {f['job']} ({f['file']}): {f['error']}: {f['message']}")
-    print(f"{s['jobs']} jobs: {s['ok']} ok, {s['incomplete']} incomplete, {s['failed']} failed "
-          f"in {s['elapsed_s']:.1f} s ({s['executor']['backend']}); wrote "
-          f"{', '.join(p.name for p in paths.values())} to {args.output}")
-    return 0 if s["ok"] == s["jobs"] else 3
+    print(f"{s['jobs']} jobs: {s['ok']} ok, {s['incomplete']} incomplete, {s['failed']} failed, "
+          f"{len(s['skipped'])} skipped in {s['elapsed_s']:.1f} s ({s['executor']['backend']}); "
+          f"wrote {', '.join(p.name for p in paths.values())} to {args.output}")
+    return 0 if s["ok"] == s["jobs"] - len(s["skipped"]) else 3

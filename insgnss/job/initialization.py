@@ -40,6 +40,7 @@ import pandas as pd
 
 from ..align import can_gyrocompass, coarse_align, gyrocompass, level_moving
 from ..attitude import euler_to_dcm
+from ..checks import check_gyro_at_rest, check_upright, static_window_error
 from ..config import Job
 from ..detect import find_static_windows
 from ..earth import enu_displacement_to_geodetic
@@ -246,6 +247,8 @@ def _initialize(job: Job, inputs: Inputs, model: ImuErrorModel, windows) -> Init
                     break
             r, p = level_moving(_mean_specific_force(win), np.zeros(3) if acc is None else acc,
                                 hdg)
+            check_upright(r, p, what="levelling at the gnss_velocity start",
+                          file=inputs.imu.attrs.get("source"))
         else:
             r, p = np.radians(given[0]), np.radians(given[1] or 0.0)
         C = euler_to_dcm(r, p, hdg)
@@ -271,11 +274,18 @@ def _initialize(job: Job, inputs: Inputs, model: ImuErrorModel, windows) -> Init
     src = "given" if heading is not None else ("gyrocompass" if can_gyrocompass(model, 0.0 if
                                                gnss is None else lat_guess)
                                                else "gnss_course")
-    res = coarse_align(win, lat_guess, 0.0, model=model,
-                       heading=heading if heading is not None else 0.0,
-                       heading_source="given" if src != "gyrocompass" else "gyrocompass",
-                       max_accel_std=ini["static_max_accel_std"],
-                       max_rate_std=np.radians(ini["static_max_rate_std_deg"]))
+    max_rate = np.radians(ini["static_max_rate_std_deg"])
+    try:
+        res = coarse_align(win, lat_guess, 0.0, model=model,
+                           heading=heading if heading is not None else 0.0,
+                           heading_source="given" if src != "gyrocompass" else "gyrocompass",
+                           max_accel_std=ini["static_max_accel_std"], max_rate_std=max_rate)
+    except AlignmentError as exc:  # name the key when the window reaches into motion
+        raise static_window_error(exc, win, ini["static_duration"], ini["static_max_accel_std"],
+                                  max_rate, file=job.path) from None
+    imu_file = inputs.imu.attrs.get("source")
+    check_upright(res.roll, res.pitch, what="static levelling", file=imu_file)
+    check_gyro_at_rest(win, model, file=imu_file)
     w_mean = win[GYRO_COLS].to_numpy().mean(0) if GYRO_COLS[0] in win.columns else None
     t_end = res.time
     hdg = res.heading

@@ -199,9 +199,14 @@ def run_foot(ctx: RunContext) -> JobResult:
     job, inputs = ctx.job, ctx.inputs
     cfg = FootConfig.from_dict(job["foot"])
     ini = job["initialization"]
-    lat = np.radians(ini["lat_deg"] or 0.0)
-    lon = np.radians(ini["lon_deg"] or 0.0)
-    h = ini["height"] or 0.0
+    # the given start; a simulated job starts where its truth does
+    start = inputs.truth.iloc[0] if inputs.truth is not None else None
+    lat = np.radians(ini["lat_deg"]) if ini["lat_deg"] is not None else \
+        (float(start["lat"]) if start is not None else 0.0)
+    lon = np.radians(ini["lon_deg"]) if ini["lon_deg"] is not None else \
+        (float(start["lon"]) if start is not None else 0.0)
+    h = ini["height"] if ini["height"] is not None else \
+        (float(start["height"]) if start is not None else 0.0)
     c0 = time.perf_counter()
     imu = inputs.imu
     baro = [c for c in BARO_COLUMNS if c in imu.columns]
