@@ -84,16 +84,22 @@ def check_upright(roll: float, pitch: float, *, what: str, file=None,
 
 
 def check_gyro_at_rest(imu: pd.DataFrame, model: ImuErrorModel | None = None, *, file=None,
-                       column: str = "inputs.imu.gyro_unit") -> None:
+                       column: str = "inputs.imu.gyro_unit",
+                       max_accel_std: float | None = None) -> None:
     """Raise :class:`~insgnss.errors.UnitError` when the mean angular rate of a still window
     is far above the Earth rate and the bias the IMU model allows (module docstring): the
     likely cause is gyro data in deg/s declared as rad/s.
 
-    ``imu`` is a window known to be still (rates or increments, body RFU); ``model`` the
-    filter's IMU error model (its bias bound and white noise are compared).
+    ``imu`` is a window meant to be still (rates or increments, body RFU); with
+    ``max_accel_std`` [m/s^2] the check runs only when the accelerometers show it still over
+    the whole window (:func:`still_duration` without a rate limit: the gyros are the suspects).
+    ``model`` is the filter's IMU error model (its bias bound and white noise are compared).
     """
     t, w, _ = _rates(imu)
     if t.size < 2:
+        return
+    if max_accel_std is not None and \
+            still_duration(imu, max_accel_std, np.inf) < t[-1] - t[0] - STILL_BLOCK:
         return
     mean = float(np.linalg.norm(w.mean(axis=0)))
     bound = 0.0 if model is None else float(np.hypot(model.gyro_bias, model.gyro_bias_instability))
@@ -127,7 +133,7 @@ def check_latitude_radians(table: pd.DataFrame | None, *, file=None, what: str =
     bad = np.flatnonzero(np.abs(lat) > np.pi / 2)
     if not bad.size:
         return
-    lines = table.attrs.get("line_no")
+    lines = table.attrs.get("source_rows")
     row = int(lines[bad[0]]) if lines is not None and len(lines) == len(table) else None
     raise InvalidValueError(
         f"latitude {lat[bad[0]]:.6g} in the {what} cannot be radians (|lat| <= pi/2): the "
@@ -138,9 +144,10 @@ def check_latitude_radians(table: pd.DataFrame | None, *, file=None, what: str =
 
 def still_duration(imu: pd.DataFrame, max_accel_std: float, max_rate_std: float,
                    block: float = STILL_BLOCK) -> float:
-    """How long [s] the IMU is still from its first sample: blocks of ``block`` seconds whose
-    specific-force and angular-rate variations (1-sigma, all axes) stay below the limits
-    [m/s^2, rad/s]; the start of the first block that is not."""
+    """How long [s] the IMU is still from its first sample: the start of the first block of
+    ``block`` seconds whose specific force or angular rate varies by more than the limits
+    [m/s^2, rad/s] (1-sigma over all axes) or whose mean departs from the mean of the first
+    block by more than them (a smooth acceleration varies little within a block)."""
     t, w, f = _rates(imu)
     if t.size < 4:
         return 0.0
@@ -148,9 +155,14 @@ def still_duration(imu: pd.DataFrame, max_accel_std: float, max_rate_std: float,
     nb = t.size // n
     if nb == 0:
         return 0.0
-    fs = np.sqrt(np.var(f[:nb * n].reshape(nb, n, 3), axis=1).sum(axis=1))
-    ws = np.sqrt(np.var(w[:nb * n].reshape(nb, n, 3), axis=1).sum(axis=1))
-    moving = np.flatnonzero((fs > max_accel_std) | (ws > max_rate_std))
+    fb, wb = f[:nb * n].reshape(nb, n, 3), w[:nb * n].reshape(nb, n, 3)
+    fs = np.sqrt(np.var(fb, axis=1).sum(axis=1))
+    ws = np.sqrt(np.var(wb, axis=1).sum(axis=1))
+    fm, wm = fb.mean(axis=1), wb.mean(axis=1)
+    fd = np.linalg.norm(fm - fm[0], axis=1)
+    wd = np.linalg.norm(wm - wm[0], axis=1)
+    moving = np.flatnonzero((fs > max_accel_std) | (ws > max_rate_std) | (fd > max_accel_std)
+                            | (wd > max_rate_std))
     if not moving.size:
         return float(t[-1] - t[0])
     return float(t[moving[0] * n] - t[0])

@@ -5,7 +5,21 @@ sentences add, matched by UTC time of day:
 
 - RMC: the UTC date (and speed over ground + true course -> ``vel_e vel_n``);
 - VTG (no time field): speed and course of the epoch it follows;
-- GST: position error standard deviations -> ``north_std east_std up_std``.
+- GST: position error standard deviations -> ``north_std east_std up_std``;
+- GSA (no time field): the VDOP of the epoch it follows.
+
+Position sigmas: from GST where the epoch has one; else (``uere``, default :data:`UERE`) from
+the dilution of precision and a user equivalent range error (UERE, the 1-sigma error of one
+pseudorange after the receiver's corrections) of the fix type:
+``east_std = north_std = HDOP * UERE / sqrt(2)`` (HDOP^2 = (sigma_E^2 + sigma_N^2) / UERE^2,
+split equally) and ``up_std = VDOP * UERE``, with VDOP from GSA, else ``2 * HDOP`` (VDOP is
+1.5-2 times HDOP with satellites above the horizon only; the larger ratio keeps the vertical
+from being over-weighted). Epochs with neither hold NaN; ``attrs["std_source"]`` counts the
+epochs per source (``gst``, ``hdop``, ``none``). The receiver's own GST estimate is always
+preferable: the UERE table describes a typical receiver of each fix type, not yours.
+
+Velocity: NMEA gives only the horizontal velocity (speed and course over ground): ``vel_e
+vel_n``, no ``vel_u`` and no velocity sigma.
 
 Height: GGA gives the height above the geoid; with the geoid separation field present the
 ellipsoidal height ``altitude + geo_sep`` is returned (``attrs["height_reference"] =
@@ -42,6 +56,15 @@ from ..validate import check_time_order, finish_attrs, read_text, warn
 from .gpstime import gps_seconds_from_utc
 
 KNOT = 1852.0 / 3600.0  #: knot -> m/s
+#: GGA fix quality -> user equivalent range error [m, 1 sigma] for sigmas from the DOP:
+#: 1/3 single point (L1 C/A code: satellite clock/orbit, residual ionosphere after the broadcast
+#: model, troposphere, multipath and noise, about 5 m; Kaplan & Hegarty, Understanding GPS,
+#: 2nd ed. 2006, ch. 7), 2/9 code differential or SBAS (the corrections remove the satellite
+#: and most atmospheric errors: about 1 m of multipath and noise), 5 RTK float (about 0.3 m),
+#: 4 RTK fixed (carrier phase: about 0.02 m)
+UERE = {1: 5.0, 3: 5.0, 2: 1.0, 9: 1.0, 5: 0.3, 4: 0.02}
+#: VDOP / HDOP when no GSA sentence gives the VDOP
+VDOP_PER_HDOP = 2.0
 #: GGA fix quality -> RTKLIB Q
 NMEA_TO_Q = {1: 5, 2: 4, 3: 5, 4: 1, 5: 2, 9: 4}
 _BAD = (ValueError, TypeError, IndexError, AttributeError, KeyError, ArithmeticError)
@@ -68,7 +91,7 @@ def _date(date) -> np.datetime64 | None:
 
 
 def read_nmea(path: str | os.PathLike, *, date=None, bad_lines: str = "skip",
-              duplicates: str = "drop") -> pd.DataFrame:
+              duplicates: str = "drop", uere: dict | None = UERE) -> pd.DataFrame:
     """Read an NMEA log into a GNSS table (see the module docstring).
 
     Parameters
@@ -80,6 +103,9 @@ def read_nmea(path: str | os.PathLike, *, date=None, bad_lines: str = "skip",
         Lines that are not valid NMEA: skipped with a warning, or an error.
     duplicates : {"drop", "error"}
         Repeated GGA epochs.
+    uere : dict, optional
+        GGA fix quality -> UERE [m] for the position sigmas of epochs without GST (module
+        docstring); None: GST only.
     """
     if bad_lines not in ("skip", "error"):
         raise ConfigError("unknown bad-line policy", column="bad_lines",
@@ -90,6 +116,8 @@ def read_nmea(path: str | os.PathLike, *, date=None, bad_lines: str = "skip",
     rmc = {}  # tod -> list of (order, date or None, vel_e, vel_n or None)
     vtg = {}  # order of the preceding timed sentence -> (vel_e, vel_n)
     gst = {}  # tod -> (n, e, u)
+    gsa = {}  # order of the preceding GGA -> VDOP (DOPs change slowly: the nearest epoch)
+    last_gga = None
     skipped = []
     last_timed = None
     for k, raw in enumerate(text.split("\n")):
@@ -121,7 +149,7 @@ def read_nmea(path: str | os.PathLike, *, date=None, bad_lines: str = "skip",
                     lat = lon = h = ns = hdop = np.nan
                     sep = ""
                 gga.append((k, row, tod, lat, lon, h, sep not in (None, ""), q, ns, hdop))
-                last_timed = k
+                last_timed = last_gga = k
             elif kind == "RMC":
                 tod = _tod(msg.timestamp)
                 d = msg.datestamp
@@ -143,6 +171,9 @@ def read_nmea(path: str | os.PathLike, *, date=None, bad_lines: str = "skip",
                         else 0.0
                     if np.isfinite(s) and np.isfinite(c):
                         vtg[last_timed] = (s * np.sin(c), s * np.cos(c))
+            elif kind == "GSA":
+                if msg.vdop not in (None, "") and last_gga is not None:
+                    gsa.setdefault(last_gga, float(msg.vdop))
             elif kind == "GST":
                 tod = _tod(msg.timestamp)
                 sd = (float(msg.std_dev_latitude), float(msg.std_dev_longitude),
@@ -223,11 +254,22 @@ def read_nmea(path: str | os.PathLike, *, date=None, bad_lines: str = "skip",
     out = {"lat": np.radians([x[3] for x in g]), "lon": np.radians([x[4] for x in g]),
            "height": np.array([x[5] for x in g], float)}
     sd = np.array([gst.get(x[2], (np.nan,) * 3) for x in g], float).reshape(-1, 3)
-    extra = {}
+    qn = np.array([x[7] for x in g], np.int64)
+    from_gst = np.isfinite(sd).all(axis=1)
+    from_dop = np.zeros(len(g), bool)
+    if uere is not None:  # sigmas from the DOP where GST gives none (module docstring)
+        hdop = np.array([x[9] for x in g], float)
+        vdop = np.array([gsa.get(x[0], np.nan) for x in g], float)
+        vdop = np.where(np.isfinite(vdop), vdop, VDOP_PER_HDOP * hdop)
+        ue = np.array([uere.get(int(v), np.nan) for v in qn], float)
+        from_dop = ~from_gst & np.isfinite(hdop * ue) & (hdop > 0)
+        h = hdop * ue / np.sqrt(2.0)
+        sd[from_dop] = np.column_stack([h, h, vdop * ue])[from_dop]
+    extra = {"std_source": {"gst": int(from_gst.sum()), "hdop": int(from_dop.sum()),
+                            "none": int((~from_gst & ~from_dop).sum())}}
     if np.isfinite(sd).any():
         out.update(east_std=sd[:, 1], north_std=sd[:, 0], up_std=sd[:, 2])
         extra["missing_std_rows"] = [int(r) for r in line_no[~np.isfinite(sd[:, 0])]]
-    qn = np.array([x[7] for x in g], np.int64)
     out["q"] = np.array([NMEA_TO_Q[int(v)] for v in qn], np.int64)
     out["fix_quality"] = qn
     out["ns"] = np.array([x[8] for x in g], float)

@@ -1,8 +1,9 @@
 """Aiding measurements of a job (``[aiding]``, docs/jobs.md): the measurement models the filter
 engine applies - GNSS position and velocity (outage windows withheld, quality flags weighted by
-``q_scale``) or, with ``aiding.gnss = "tight"``, per-satellite pseudoranges and Dopplers (outage
-windows withheld or thinned to the highest satellites; docs/tight.md), ZUPT and ZARU at the
-detected or declared still times (speed gated), NHC, CUPT at
+``q_scale``; a receiver that reports the horizontal velocity only, NMEA, gives a 2-D velocity
+measurement, :class:`HorizontalGnssVelocity`) or, with ``aiding.gnss = "tight"``, per-satellite
+pseudoranges and Dopplers (outage windows withheld or thinned to the highest satellites;
+docs/tight.md), ZUPT and ZARU at the detected or declared still times (speed gated), NHC, CUPT at
 control points, odometer speed.
 
 The models themselves (``z, H, R``) are in :mod:`insgnss.filter.measurements`; this module
@@ -93,6 +94,30 @@ class SpeedGatedZaru(SpeedGated, Zaru):
     def __init__(self, times, max_speed: float, **kw):
         super().__init__(times, **kw)
         self.max_speed = float(max_speed)
+
+
+class HorizontalGnssVelocity(GnssVelocity):
+    """GNSS velocity of a receiver that reports only the horizontal velocity (NMEA: speed and
+    course over ground, RMC/VTG): the east and north rows of :class:`GnssVelocity` (the same
+    lever-arm model), a 2-D measurement.
+
+    ``data`` holds ``vel_e vel_n`` and optionally ``vel_e_std vel_n_std``; other parameters
+    as :class:`GnssVelocity`.
+    """
+
+    def __init__(self, data: pd.DataFrame, **kw):
+        d = data.copy()
+        d["vel_u"] = 0.0  # not measured: its row is dropped in evaluate
+        if "vel_e_std" in d.columns and "vel_n_std" in d.columns:
+            d["vel_u_std"] = 1.0
+        super().__init__(d, **kw)
+
+    def evaluate(self, i, nav):
+        out = super().evaluate(i, nav)
+        if out is None:
+            return None
+        z, H, R = out
+        return z[:2], H[:2], R[:2, :2]
 
 
 def stillness_times(job: Job, imu: pd.DataFrame) -> np.ndarray:
@@ -252,6 +277,11 @@ def _gnss_sources(job: Job, gnss: pd.DataFrame, lever_arm, windows, imu: pd.Data
     out = []
     if a["gnss_position"]:
         std = a["gnss_position_std"]
+        if std is None and not all(c in g.columns for c in GnssPosition.STD_COLS):
+            raise ConfigError(
+                "the GNSS file gives no position sigmas (east_std north_std up_std; NMEA: no "
+                "GST sentence and no HDOP): set aiding.gnss_position_std [m]", file=file,
+                column="aiding.gnss_position_std")
         gp = g
         if std is not None:
             gp = gp.drop(columns=[c for c in GnssPosition.STD_COLS if c in gp.columns])
@@ -264,7 +294,8 @@ def _gnss_sources(job: Job, gnss: pd.DataFrame, lever_arm, windows, imu: pd.Data
                          use_q=use_q, min_std=a["gnss_min_std"], **kw)
         st = q_steps + [Step(int(m.valid.sum()), "with a finite position and sigma",
                              "every remaining epoch has a non-finite position or sigma, or a "
-                             "sigma <= 0", "east_std" if std is None else
+                             "sigma <= 0 (an NMEA epoch without GST or HDOP has no sigma: set "
+                             "aiding.gnss_position_std)", "east_std" if std is None else
                              "aiding.gnss_position_std", "with a non-finite position or sigma")]
         out.append(Source("aiding.gnss_position", m.name, "GNSS positions", st, m, file, 3))
     if a["gnss_velocity"]:
@@ -272,15 +303,25 @@ def _gnss_sources(job: Job, gnss: pd.DataFrame, lever_arm, windows, imu: pd.Data
             raise InputFormatError("GNSS velocity aiding requested but the GNSS data has no "
                                    "velocity", file=file, column="vel_e")
         std = a["gnss_velocity_std"]
+        # NMEA gives the horizontal velocity only (speed and course): a 2-D measurement
+        model = GnssVelocity if "vel_u" in g.columns else HorizontalGnssVelocity
+        n_std = 3 if model is GnssVelocity else 2
+        have = [c for c in model.STD_COLS[:n_std] if c in g.columns]
+        if std is None and len(have) < n_std:
+            raise ConfigError(
+                "the GNSS file gives no velocity sigmas (vel_e_std vel_n_std"
+                + (" vel_u_std" if model is GnssVelocity else "; NMEA has none") +
+                "): set aiding.gnss_velocity_std [m/s]", file=file,
+                column="aiding.gnss_velocity_std")
         gv = velocity_table(g, windows)
         if std is not None:
             gv = gv.drop(columns=[c for c in GnssVelocity.STD_COLS if c in gv.columns])
         elif a["gnss_velocity_std_scale"] != 1.0:
             gv = gv.copy()
-            for c in GnssVelocity.STD_COLS:
+            for c in have:
                 gv[c] = gv[c] * a["gnss_velocity_std_scale"]
-        m = GnssVelocity(gv, lever_arm=lever_arm, std_scale=scale if use_q else None,
-                         use_q=use_q, **({"std": std} if std is not None else {}))
+        m = model(gv, lever_arm=lever_arm, std_scale=scale if use_q else None,
+                  use_q=use_q, **({"std": std} if std is not None else {}))
         st = q_steps + [Step(int(m.valid.sum()), "with a finite velocity and sigma",
                              "every remaining epoch has a non-finite velocity or sigma, or a "
                              "sigma <= 0", "vel_e_std" if std is None else
@@ -547,8 +588,8 @@ def applied_check(job: Job, aiding: Aiding, counts: dict, innovations: pd.DataFr
     return failure, notes
 
 
-__all__ = ["MOST_REJECTED", "Aiding", "Source", "SpeedGated", "SpeedGatedZaru", "SpeedGatedZupt",
-           "Step",
+__all__ = ["MOST_REJECTED", "Aiding", "HorizontalGnssVelocity", "Source", "SpeedGated",
+           "SpeedGatedZaru", "SpeedGatedZupt", "Step",
            "applied_check", "build_aiding", "build_measurements", "check_aiding", "clock_ref",
            "reception_times",
            "measurement_counts", "stillness_times"]

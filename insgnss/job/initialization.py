@@ -102,8 +102,15 @@ def _mean_acceleration(gnss: pd.DataFrame, t0: float, t1: float) -> np.ndarray |
     k0, k1 = np.searchsorted(tg, [t0, t1])
     if np.diff(tg[max(k0 - 1, 0):k1 + 1]).max(initial=0.0) > MAX_INTERPOLATION:
         return None  # an outage inside: no velocity difference over it
-    v = [np.interp([t0, t1], tg, gnss[c].to_numpy(float)) for c in ("vel_e", "vel_n", "vel_u")]
-    return np.array([(b - a) / (t1 - t0) for a, b in v])
+    v = [np.interp([t0, t1], tg, gnss[c].to_numpy(float)) for c in _vel_cols(gnss)]
+    acc = [(b - a) / (t1 - t0) for a, b in v]
+    return np.array(acc + [0.0] * (3 - len(acc)))  # horizontal-only GNSS: no vertical term
+
+
+def _vel_cols(gnss: pd.DataFrame) -> list[str]:
+    """The velocity columns of a GNSS table: ENU, or east/north only (NMEA: speed and course
+    over ground, no vertical velocity)."""
+    return [c for c in ("vel_e", "vel_n", "vel_u") if c in gnss.columns]
 
 
 def _gnss_at(gnss: pd.DataFrame, t: float, windows) -> np.ndarray:
@@ -253,7 +260,10 @@ def _initialize(job: Job, inputs: Inputs, model: ImuErrorModel, windows) -> Init
             r, p = np.radians(given[0]), np.radians(given[1] or 0.0)
         C = euler_to_dcm(r, p, hdg)
         t_imu = float(imu.index[imu.index.get_indexer([t_s], method="nearest")[0]])
-        vel = gnss[["vel_e", "vel_n", "vel_u"]].iloc[k].to_numpy(float)
+        # a horizontal-only GNSS velocity (NMEA) starts with zero vertical velocity, inside
+        # the initial velocity sigma of a vehicle on a road grade
+        vel = np.zeros(3)
+        vel[:len(_vel_cols(gnss))] = gnss[_vel_cols(gnss)].iloc[k].to_numpy(float)
         st = NavState(*position_at(t_imu, C), vel, C, t_imu)
         return Initialization(st, method, "gnss_velocity", pos_std=pos_std, vel_std=0.2,
                               att_std=(np.radians(2), np.radians(2),
@@ -275,6 +285,9 @@ def _initialize(job: Job, inputs: Inputs, model: ImuErrorModel, windows) -> Init
                                                gnss is None else lat_guess)
                                                else "gnss_course")
     max_rate = np.radians(ini["static_max_rate_std_deg"])
+    imu_file = inputs.imu.attrs.get("source")
+    # deg/s declared as rad/s also fails the stillness test (57 times the noise): name it first
+    check_gyro_at_rest(win, model, file=imu_file, max_accel_std=ini["static_max_accel_std"])
     try:
         res = coarse_align(win, lat_guess, 0.0, model=model,
                            heading=heading if heading is not None else 0.0,
@@ -283,9 +296,7 @@ def _initialize(job: Job, inputs: Inputs, model: ImuErrorModel, windows) -> Init
     except AlignmentError as exc:  # name the key when the window reaches into motion
         raise static_window_error(exc, win, ini["static_duration"], ini["static_max_accel_std"],
                                   max_rate, file=job.path) from None
-    imu_file = inputs.imu.attrs.get("source")
     check_upright(res.roll, res.pitch, what="static levelling", file=imu_file)
-    check_gyro_at_rest(win, model, file=imu_file)
     w_mean = win[GYRO_COLS].to_numpy().mean(0) if GYRO_COLS[0] in win.columns else None
     t_end = res.time
     hdg = res.heading

@@ -12,6 +12,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import pandas as pd
 
+from ..checks import check_latitude_radians
 from ..config import Job
 from ..errors import ConfigError
 from ..imu import ImuErrorModel, grade
@@ -226,6 +227,8 @@ def load_inputs(job: Job, seed: int | None = None) -> Inputs:
     ref = read_reference(job)
     check_time_bases({"IMU": imu, "GNSS": gnss, "odometer": odo, "reference": ref,
                       "control points": cp}, job["job"]["time_base"], file=job.path)
+    for table, what in ((gnss, "GNSS table"), (ref, "reference"), (cp, "control points")):
+        check_latitude_radians(table, what=what)  # degrees in a radians column
     return Inputs(imu=imu, gnss=gnss, gnss_raw=raw, spp=sol, odometer=odo, reference=ref,
                   reference_point=job["inputs"]["reference"]["point"], control_points=cp,
                   lever_arm=la, imu_model=imu_model(job, None))
