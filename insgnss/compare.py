@@ -20,6 +20,11 @@ tell steady straight motion from rest, so vehicle ZUPT/ZARU are gated by the nom
 (``max_speed``, as in the processing pipeline). The foot-mounted comparison
 (:func:`compare_foot_runs`) uses the compiled pedestrian filter of :mod:`insgnss.foot`.
 
+Gating: the updates a run is about (ZUPT, ZARU, CUPT) are not gated (``gate_zupt``); the
+GNSS run and the job's own runs keep the filter's gate. Every table shows per run how many
+measurements the innovation gate rejected (``rejected``, by type in ``rejected_types``), so a
+run that did not get the updates its name says is visible.
+
 Errors
 ------
 Against a truth trajectory (``lat lon height vel_e vel_n vel_u roll pitch heading``, e.g. a
@@ -88,10 +93,13 @@ class CompareSettings:
         helps when steady cruising looks still, but after a long free-inertial stretch the
         nominal speed is itself wrong by more than the gate and the stops get no update.
     gate_zupt : bool
-        Chi-square gating of ZUPT/ZARU (the filter's default gate). Off by default: after a
-        free-inertial stretch the covariance is optimistic against unmodelled errors (scale
-        factors, misalignment), so the gate rejects exactly the stop updates the comparison
-        is about; the detector (with its ``margin``) decides.
+        Chi-square gating of ZUPT, ZARU and control-point updates (the filter's default gate).
+        Off by default: after a free-inertial stretch the covariance is optimistic against
+        unmodelled errors (scale factors, misalignment), so the gate rejects exactly the
+        updates the comparison is about (a consumer IMU reaches a control point with a NIS of
+        60-80 against a 0.9999 gate of 21 for 3 degrees of freedom, and "ZUPT+CUPT" became
+        ZUPT only); the detector (with its ``margin``) and the surveyed points decide. The
+        table's ``rejected`` column counts what the gate rejected in each run.
     cupt_std : float
         Default control-point sigma [m] when the table has no ``east_std`` ...
     cupt_radius : float
@@ -300,15 +308,27 @@ def growth_exponent(t_rel: np.ndarray, err: np.ndarray, window=(10.0, 300.0),
     return float(b), float(a)
 
 
+def rejected_counts(rejected: pd.DataFrame | None) -> tuple[int, str]:
+    """Number of measurements the innovation gate rejected and the count per type
+    (``"cupt 2, gnss_pos 1"``; "" when none) of a filter's rejection log."""
+    if rejected is None or not len(rejected):
+        return 0, ""
+    per = rejected["type"].value_counts().sort_index() if "type" in rejected.columns else {}
+    return int(len(rejected)), ", ".join(f"{k} {int(v)}" for k, v in per.items())
+
+
 def summary_table(errors: dict[str, pd.DataFrame], growth: dict, still_mask: pd.Series | None,
-                  settings: CompareSettings) -> pd.DataFrame:
+                  settings: CompareSettings, rejected: dict | None = None) -> pd.DataFrame:
     """One row per run: final / max / RMS horizontal error [m], final vertical error [m], RMS
     and final velocity error [m/s], max velocity error while still [m/s], final heading error
-    [deg] and the growth exponent."""
+    [deg], the growth exponent and the measurements the innovation gate rejected (``rejected``,
+    ``rejected_types``; ``rejected`` maps a run to its rejection log)."""
     rows = []
     for run, e in errors.items():
         h = e["horizontal"].dropna()
-        row = {"run": run, "label": LABELS.get(run, run),
+        n_rej, types = rejected_counts((rejected or {}).get(run))
+        row = {"run": run, "label": LABELS.get(run, run), "rejected": n_rej,
+               "rejected_types": types,
                "final_h_err_m": float(h.iloc[-1]), "max_h_err_m": float(h.max()),
                "rms_h_err_m": float(np.sqrt(np.mean(h.to_numpy() ** 2)))}
         if "up" in e:
@@ -337,7 +357,7 @@ def _settled_still(t: np.ndarray, still: np.ndarray, settle: float) -> np.ndarra
 
 
 def _finish(runs, solutions, truth, still, t, settings, filter_results, cupt_times, t0,
-            truth_lever_arm=None):
+            truth_lever_arm=None, rejected=None):
     from .evaluate import move_point
 
     errors, growth = {}, {}
@@ -355,7 +375,8 @@ def _finish(runs, solutions, truth, still, t, settings, filter_results, cupt_tim
         if truth is not None and "stationary" in truth.columns:  # really at rest, too
             tt = truth.index.to_numpy(float)
             mask &= np.interp(t, tt, truth["stationary"].to_numpy(float)) > 0.5
-    table = summary_table(errors, growth, mask, settings)
+    rejected = {**{r: res.rejected for r, res in filter_results.items()}, **(rejected or {})}
+    table = summary_table(errors, growth, mask, settings, rejected)
     return CompareResult(list(runs), solutions, errors, table, growth,
                          np.zeros(t.size, bool) if still is None else still,
                          cupt_times, filter_results, settings, t0)
@@ -377,6 +398,7 @@ def compare_runs(
     progress: bool = False,
     job_solutions: dict[str, pd.DataFrame] | None = None,
     truth_lever_arm=None,
+    job_rejected: dict[str, pd.DataFrame] | None = None,
 ) -> CompareResult:
     """Run the same IMU data with each aiding set and compare the errors against ``truth``.
 
@@ -409,6 +431,9 @@ def compare_runs(
     truth_lever_arm : 3-vector, optional
         Body-frame offset [m, RFU] from the IMU to the point the truth measures (e.g. a GNSS
         antenna for an RTK reference); the solutions are moved there before comparing.
+    job_rejected : dict, optional
+        The rejection logs of the ``job_solutions`` runs (``FilterResult.rejected``), for the
+        table's ``rejected`` column.
 
     Returns
     -------
@@ -420,8 +445,9 @@ def compare_runs(
     cfg = replace(config) if config is not None else FilterConfig()
     if s.solution == "smoothed":
         cfg.smoother = True
-    if not s.gate_zupt:
-        cfg.gate_probabilities = {**cfg.gate_probabilities, "zupt": 0.0, "zaru": 0.0}
+    if not s.gate_zupt:  # the updates the comparison is about are not gated (CompareSettings)
+        cfg.gate_probabilities = {**cfg.gate_probabilities, "zupt": 0.0, "zaru": 0.0,
+                                  Cupt.name: 0.0}
     t = imu.index.to_numpy(float)
     if isinstance(still, Stillness):
         still = still.still
@@ -489,7 +515,7 @@ def compare_runs(
         elif run in ("job", "job_smoothed", "riss", "riss_smoothed"):
             solutions[run] = job_solutions[run].loc[t[0]:][NAV_COLS]
     return _finish(runs, solutions, truth, still_arr, t, s, results, cupt_times, float(t[0]),
-                   truth_lever_arm)
+                   truth_lever_arm, {k: v for k, v in (job_rejected or {}).items() if k in runs})
 
 
 # --- foot-mounted: the compiled pedestrian filter ---------------------------------------------
@@ -627,10 +653,13 @@ def format_table(table: pd.DataFrame) -> str:
     cols = [c for c in ("final_h_err_m", "max_h_err_m", "rms_h_err_m", "final_v_err_m",
                         "rms_vel_err_m_s", "max_stop_vel_err_m_s", "final_heading_err_deg",
                         "growth_exponent") if c in table.columns]
-    head = f"{'run':12s}" + "".join(f"{c:>22s}" for c in cols)
+    head = f"{'run':14s}" + "".join(f"{c:>22s}" for c in cols) + f"{'rejected':>10s}"
     lines = [head]
     for run, row in table.iterrows():
-        lines.append(f"{run:12s}" + "".join(f"{row[c]:22.4g}" for c in cols))
+        rej = int(row.get("rejected", 0))
+        types = row.get("rejected_types") or ""
+        lines.append(f"{run:14s}" + "".join(f"{row[c]:22.4g}" for c in cols) + f"{rej:10d}"
+                     + (f"  ({types})" if types else ""))
     return "\n".join(lines)
 
 

@@ -231,3 +231,39 @@ def test_settings_validation():
         CompareSettings(solution="best")
     with pytest.raises(ConfigError):
         CompareSettings(fit_window=(10.0, 5.0))
+
+
+def test_cupt_is_not_gated_and_rejections_are_counted():
+    """A consumer IMU reaches each surveyed point with a NIS of 60-80 (free-inertial drift
+    between stops against a covariance that misses the unmodelled errors): with the filter's
+    gate every control point was rejected and the "ZUPT+CUPT" row was ZUPT only. CUPT is not
+    gated in the comparison (like ZUPT/ZARU), and the table shows the rejections per run."""
+    truth, imu, init, model = _car("consumer")
+    still = detect_stillness(imu, DetectorConfig(method="amv", window=0.5, threshold=0.05,
+                                                 min_stance=1.0, margin=0.3))
+    cp = control_points_at_stops(truth)
+    cfg = FilterConfig(imu_model=model, smoother=False)
+    res = compare_runs(imu, init, truth, still=still, control_points=cp,
+                       runs=["zupt", "zupt_cupt"], config=cfg)
+    inn = res.filter_results["zupt_cupt"].innovations
+    cupt = inn[inn["type"] == "cupt"]
+    assert len(cupt) == 4 and cupt["accepted"].all()
+    from scipy.stats import chi2
+
+    assert cupt["nis"].iloc[0] > chi2.ppf(0.9999, 3)  # the filter's gate would reject it
+    tab = res.table
+    assert list(tab["rejected"]) == [0, 0]
+    # on the 2 cm points after the last update; ZUPT alone drifts tens of metres
+    assert tab.loc["zupt_cupt", "final_h_err_m"] < 0.5
+    assert tab.loc["zupt", "final_h_err_m"] > 20 * tab.loc["zupt_cupt", "final_h_err_m"]
+    # gating them (gate_zupt) loses the points, and the table says so
+    gated = compare_runs(imu, init, truth, still=still, control_points=cp,
+                         runs=["zupt_cupt"], config=cfg, settings=CompareSettings(gate_zupt=True))
+    row = gated.table.loc["zupt_cupt"]
+    n_cupt = int(row["rejected_types"].split("cupt ")[1].split(",")[0])
+    assert n_cupt >= 2 and row["rejected"] > n_cupt  # control points and stop updates
+    assert row["rms_h_err_m"] > 1.5 * tab.loc["zupt_cupt", "rms_h_err_m"]
+    from insgnss.compare import format_table
+
+    text = format_table(gated.table)
+    assert "rejected" in text.splitlines()[0] and "(cupt " in text

@@ -103,6 +103,7 @@ def _vehicle(args, job):
     # the preprocessing, e.g. an estimated IMU time offset, to the inputs the other runs use)
     jr = run_job(job, progress=False, inputs=inputs)
     job_solutions = {"job": jr.filter.forward, "job_smoothed": jr.filter.smoothed}
+    job_rejected = {"job": jr.filter.rejected, "job_smoothed": jr.filter.rejected}
     if inputs.odometer is not None and len(inputs.odometer) and \
             job["filter"]["process_model"] != "riss":
         # the same job with the RISS process model (odometer as its input)
@@ -114,6 +115,7 @@ def _vehicle(args, job):
         job_r.settings["inputs"]["imu"]["estimate_time_offset"] = False  # already applied
         jr_r = run_job(job_r, progress=False, inputs=inputs)
         job_solutions.update(riss=jr_r.filter.forward, riss_smoothed=jr_r.filter.smoothed)
+        job_rejected.update(riss=jr_r.filter.rejected, riss_smoothed=jr_r.filter.rejected)
     model = inputs.imu_model
     init = initialize(job, inputs, model)
     imu = inputs.imu.loc[init.state.time:]
@@ -158,7 +160,7 @@ def _vehicle(args, job):
     res = compare_runs(imu, init.state, truth.loc[init.state.time:], still=still,
                        control_points=cp, gnss=gnss, gnss_lever_arm=inputs.lever_arm,
                        runs=_runs(args), config=cfg, settings=settings,
-                       job_solutions=job_solutions,
+                       job_solutions=job_solutions, job_rejected=job_rejected,
                        truth_lever_arm=inputs.lever_arm if inputs.truth is None and
                        inputs.reference_point == "antenna" else None)
     name = job.simulation.get("scenario", {}).get("name") or job["job"]["name"]
