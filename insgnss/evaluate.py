@@ -68,6 +68,30 @@ def position_errors(solution: pd.DataFrame, reference: pd.DataFrame, *,
     return out
 
 
+def trajectory_errors(solution: pd.DataFrame, reference: pd.DataFrame, *,
+                      max_gap: float = 0.5) -> pd.DataFrame:
+    """Errors (solution - reference) at the reference epochs: ``east north up horizontal``
+    [m] (:func:`position_errors`), and where both tables have them ``vel_e vel_n vel_u``
+    [m/s] and ``roll pitch heading`` [rad, wrapped to +-pi] (the solution interpolated
+    linearly, angles unwrapped first). Epochs the solution does not cover are NaN."""
+    from .attitude import wrap_pi
+
+    out = position_errors(solution, reference, max_gap=max_gap)
+    ts = solution.index.to_numpy(float)
+    tr = reference.index.to_numpy(float)
+    bad = out["horizontal"].isna().to_numpy()
+    for cols, angle in ((("vel_e", "vel_n", "vel_u"), False), (("roll", "pitch", "heading"), True)):
+        for c in cols:
+            if c not in solution.columns or c not in reference.columns:
+                continue
+            s = solution[c].to_numpy(float)
+            e = np.interp(tr, ts, np.unwrap(s) if angle else s) - reference[c].to_numpy(float)
+            e = wrap_pi(e) if angle else e
+            e[bad] = np.nan
+            out[c] = e
+    return out
+
+
 def outage_metrics(errors: pd.DataFrame, windows, *, t_first: float | None = None,
                    settle_time: float = 10.0, guard_time: float = 1.0) -> tuple[pd.DataFrame, dict]:
     """Per-outage error table and a summary dict (drive benchmark protocol)."""

@@ -178,9 +178,16 @@ def test_foot_comparison_on_a_simulated_walk(tmp_path):
 def test_cli_compare_foot_folder(tmp_path, capsys):
     d, _, _ = _walk_folder(tmp_path)
     out = tmp_path / "out"
-    assert cli_main(["compare", str(d), "-o", str(out), "--runs", "free,zupt_zaru"]) == 0
+    assert cli_main(["compare", str(d), "-o", str(out), "--only", "free,zupt_zaru"]) == 0
     table = pd.read_csv(out / "compare_table.csv", index_col=0)
     assert list(table.index) == ["free", "zupt_zaru"]
+    assert list(table["rejected"]) == [0, 0]  # the foot INS has no gate
+    # the old spelling still works, with a deprecation warning (montecarlo --runs is a count)
+    with pytest.warns(FutureWarning, match="--only"):
+        assert cli_main(["compare", str(d), "-o", str(tmp_path / "old"), "--runs", "free",
+                         "--no-figures"]) == 0
+    assert list(pd.read_csv(tmp_path / "old" / "compare_table.csv", index_col=0).index) == [
+        "free"]
     summary = json.loads((out / "compare_summary.json").read_text())
     assert summary["runs"] == ["free", "zupt_zaru"]
     assert (out / "drift_loglog.png").exists() and (out / "errors_vs_time.png").exists()

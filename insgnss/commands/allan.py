@@ -1,15 +1,18 @@
 """Allan deviation of a static IMU log with ARW/VRW, bias instability and rate random walk.
 
-Reads a native insgnss IMU table (increments ``dtheta_* dv_*`` or rates ``gyro_* accel_*``),
-computes the overlapping Allan deviation of the six axes (rate tables from the rates as sampled,
-increment tables from the increments), prints the noise coefficients in datasheet units
+Reads an IMU file - by default a native insgnss IMU table (increments ``dtheta_* dv_*`` or
+rates ``gyro_* accel_*``), or any format, columns, units and mounting a job's ``[inputs.imu]``
+describes (the same options as ``insgnss mechanize``, or ``--job JOB.toml``) -, computes the
+overlapping Allan deviation of the six axes (rate tables from the rates as sampled, increment
+tables from the increments), prints the noise coefficients in datasheet units
 (quantisation Q where the curve shows the -1 slope, ARW/VRW, bias instability, RRW) and writes
 ``<stem>_allan.png`` (curves with the fitted -1, -1/2, 0 and +1/2 reference slopes),
 ``<stem>_allan.csv`` (the deviation per tau, SI) and ``<stem>_allan_coefficients.csv``.
 
-Example::
+Examples::
 
     insgnss allan out/static/imu.csv -o out/static --start 0 --stop 3600
+    insgnss allan static_log.csv --format csv --gyro-unit deg/s --accel-unit g --time-unit ms
 """
 
 from __future__ import annotations
@@ -22,7 +25,10 @@ HELP = "Allan deviation of a static IMU log: ARW/VRW, bias instability, RRW and 
 
 
 def register(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("imu_file", metavar="IMU_FILE", help="native IMU table (CSV)")
+    from ._imu_input import add_imu_arguments
+
+    add_imu_arguments(parser, imu_help="IMU file (default format: native insgnss table); "
+                      "optional with --job")
     parser.add_argument("-o", "--output", metavar="DIR", default=None,
                         help="output folder (default: the folder of IMU_FILE)")
     parser.add_argument("--start", type=float, default=None, help="first time to use [s]")
@@ -36,10 +42,10 @@ def run(args: argparse.Namespace) -> int:
     from ..analysis.allan import allan_analysis, coefficients_table, plot_allan
     from ..errors import InputFormatError, InvalidValueError
     from ..imu import is_increment_table
-    from ..io.native import atomic_write, read_table
+    from ..io.native import atomic_write
+    from ._imu_input import read_imu_input
 
-    src = Path(args.imu_file)
-    imu = read_table(src)
+    imu, src = read_imu_input(args, default_format="native")
     try:
         is_increment_table(imu)
     except ValueError as exc:

@@ -40,8 +40,11 @@ def register(p: argparse.ArgumentParser) -> None:
                    "and truth.csv (foot-mounted)")
     p.add_argument("-o", "--output", type=Path, default=Path("compare_out"),
                    help="output folder (table, figures)")
-    p.add_argument("--runs", default=None,
-                   help="comma-separated subset of free,zupt,zupt_zaru,zupt_cupt,gnss")
+    p.add_argument("--only", default=None, metavar="RUN,...",
+                   help="compare only these runs: comma-separated subset of free,zupt,"
+                   "zupt_zaru,zupt_cupt,gnss,job,job_smoothed,riss,riss_smoothed")
+    # --runs was this option's name; in `insgnss montecarlo` --runs is a number of runs
+    p.add_argument("--runs", dest="runs_deprecated", default=None, help=argparse.SUPPRESS)
     p.add_argument("--solution", choices=["forward", "smoothed"], default="forward",
                    help="compare the forward (causal) or the smoothed solutions")
     p.add_argument("--fit-window", nargs=2, type=float, default=None, metavar=("T0", "T1"),
@@ -66,7 +69,14 @@ def _settings(args, foot: bool):
 
 
 def _runs(args):
-    return None if not args.runs else [r.strip() for r in args.runs.split(",") if r.strip()]
+    only = args.only
+    if args.runs_deprecated is not None:
+        import warnings
+
+        warnings.warn("insgnss compare --runs is deprecated: use --only (in insgnss montecarlo "
+                      "--runs is the number of runs)", FutureWarning, stacklevel=2)
+        only = only or args.runs_deprecated
+    return None if not only else [r.strip() for r in only.split(",") if r.strip()]
 
 
 def _foot(args):
