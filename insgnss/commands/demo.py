@@ -23,7 +23,7 @@ def demo_job_path() -> Path:
 
 def register(p: argparse.ArgumentParser) -> None:
     p.add_argument("-o", "--output", type=Path, default=Path("out/demo"),
-                   help="output folder (default: out/demo)")
+                   help="output folder, relative to the current folder (default: out/demo)")
     p.add_argument("--seed", type=int, help="simulation seed")
     p.add_argument("--no-progress", action="store_true")
     add_wait_argument(p)

@@ -31,7 +31,9 @@ EXIT_INCOMPLETE = 3
 
 def register(p: argparse.ArgumentParser) -> None:
     p.add_argument("job", type=Path, help="TOML job file")
-    p.add_argument("-o", "--output", type=Path, help="output folder (default: [outputs] dir)")
+    p.add_argument("-o", "--output", type=Path,
+                   help="output folder, relative to the current folder (default: the job's "
+                   "[outputs] dir, relative to the job file; docs/jobs.md, Paths)")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.add_argument("--no-report", action="store_true", help="do not write report.html")
     p.add_argument("--seed", type=int, help="simulation seed (jobs that simulate a scenario)")
