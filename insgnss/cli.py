@@ -4,9 +4,10 @@ Sub-commands live in :mod:`insgnss.commands`, one module each, discovered automa
 defines ``NAME`` (the sub-command), ``HELP`` (one line) and ``register(parser)`` that adds its
 arguments and sets ``parser.set_defaults(func=run)`` where ``run(args) -> int``.
 The CLI only parses arguments, calls the pipeline and reports; :class:`InsgnssError` is printed
-without a traceback and the exit status is 2 (as for running out of memory). Commands that
-write outputs check and lock their output folder before computing (:mod:`insgnss.commands.
-_outputs`).
+without a traceback and the exit status is 2 (as for running out of memory); warnings are
+printed one line each, without the Python source line (:func:`_warning_printer`). Commands
+that write outputs check and lock their output folder before computing
+(:mod:`insgnss.commands._outputs`).
 """
 
 from __future__ import annotations
@@ -39,12 +40,30 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+def _warning_printer(command: str):
+    """``warnings.formatwarning`` of the command line: one line per warning, ``insgnss
+    COMMAND: warning: MESSAGE`` (the category in brackets unless it is an
+    :class:`~insgnss.errors.InsgnssWarning`), without the Python file, line number and source
+    line a user cannot act on (the message names the data file, row and column)."""
+    from .errors import InsgnssWarning
+
+    def fmt(message, category, filename, lineno, line=None):
+        kind = "" if issubclass(category, InsgnssWarning) else f" ({category.__name__})"
+        return f"insgnss {command}: warning{kind}: {message}\n"
+
+    return fmt
+
+
 def main(argv: list[str] | None = None) -> int:
+    import warnings
+
     parser = build_parser()
     args = parser.parse_args(argv)
     if not getattr(args, "func", None):
         parser.print_help()
         return 1
+    saved = warnings.formatwarning
+    warnings.formatwarning = _warning_printer(args.command)
     try:
         return int(args.func(args) or 0)
     except InsgnssError as exc:
@@ -59,6 +78,8 @@ def main(argv: list[str] | None = None) -> int:
               "outage windows need more; the smoother stores covariances per epoch); the "
               "previous outputs are left as they were", file=sys.stderr)
         return 2
+    finally:
+        warnings.formatwarning = saved
 
 
 if __name__ == "__main__":  # pragma: no cover

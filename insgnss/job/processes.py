@@ -126,6 +126,8 @@ def _strapdown_filter(ctx: RunContext, tuned: Tuned, smoother: bool = True):
 
         res = run_wander_filter(imu, init.state, aiding.models, cfg)
     else:
+        if ctx.progress and smoother:
+            compile_before_progress(imu, init.state, aiding.models, cfg)
         res = run_filter(imu, init.state, aiding.models, cfg, progress=ctx.progress and smoother)
     return res, init, aiding, imu
 
@@ -151,6 +153,27 @@ def run_strapdown(ctx: RunContext) -> JobResult:
         ctx = replace(ctx, job=tuned.job, inputs=tuned.inputs)
     return _filter_result(ctx, init, res, aiding, tuned.model, len(imu),
                           None if tune_result is None else tune_result.as_dict())
+
+
+#: IMU span [s] of the warm-up run of :func:`compile_before_progress`: a few filter epochs and
+#: the first GNSS / constraint updates
+WARM_SPAN = 3.0
+
+
+def compile_before_progress(imu, state, models, cfg: FilterConfig) -> None:
+    """Run the filter over the first :data:`WARM_SPAN` seconds without a progress bar, so that
+    the compiled kernels (numba: compiled on the first call, or loaded from the cache) are
+    ready before the progress bar starts and its ETA measures the filter, not the compiler.
+    A warm-up that fails leaves the error to the real run."""
+    from ..errors import InsgnssError
+
+    part = imu.loc[:float(imu.index[0]) + WARM_SPAN]
+    if len(part) < 3:
+        return
+    try:
+        run_filter(part, state, models, cfg, progress=False)
+    except InsgnssError:
+        pass
 
 
 def run_riss(ctx: RunContext) -> JobResult:
@@ -279,5 +302,5 @@ def run_process(ctx: RunContext) -> JobResult:
     return PROCESSES[process_name(ctx.job)](ctx)
 
 
-__all__ = ["PRESETS", "PROCESSES", "filter_config", "process_name", "run_foot", "run_process",
-           "run_riss", "run_strapdown"]
+__all__ = ["PRESETS", "PROCESSES", "compile_before_progress", "filter_config", "process_name",
+           "run_foot", "run_process", "run_riss", "run_strapdown"]
