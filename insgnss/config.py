@@ -381,6 +381,34 @@ AUTOTUNE_PARAMETERS = ("imu_time_offset", "gnss_pos_scale",
                        "accel_vrw", "gyro_arw", "accel_bias_instability",
                        "gyro_bias_instability", "nhc_std", "zupt_std")
 
+def _window_end(v, key, file):
+    """A processing-window end (insgnss.job.span): a finite number, "+SECONDS" (>= 0) or a
+    GPS time "YYYY-MM-DD hh:mm:ss[.fff]"."""
+    expected = 'a time [s, job time base], "+SECONDS" or "YYYY-MM-DD hh:mm:ss"'
+    if not isinstance(v, str):
+        if not math.isfinite(float(v)):
+            raise _fail("not a finite number", key, file, expected, repr(v))
+        return float(v)
+    text = v.strip()
+    if text.startswith("+"):
+        try:
+            x = float(text[1:])
+        except ValueError:
+            x = math.nan
+        if not (math.isfinite(x) and x >= 0):
+            raise _fail("not a number of seconds", key, file, '"+SECONDS" with SECONDS >= 0',
+                        repr(v))
+        return text
+    try:
+        datetime.datetime.fromisoformat(text)
+    except ValueError:
+        raise _fail("not a time", key, file, expected, repr(v)) from None
+    return text
+
+
+WINDOW_END = Rule('a time [s, job time base], "+SECONDS" after the first IMU sample, or a GPS '
+                  'time "YYYY-MM-DD hh:mm:ss"', _window_end)
+
 #: Schema: table -> key -> spec (:func:`_spec`); a dict without a ``"type"`` entry is a
 #: sub-table. ``_ANY`` accepts any TOML value.
 SCHEMA: dict[str, Any] = {
@@ -398,6 +426,12 @@ SCHEMA: dict[str, Any] = {
                           "what carries the IMU (insgnss/data/profiles.toml, "
                           "docs/generalization.md); the job's own keys override it",
                           choices=list(platforms())),
+        "start": _spec((int, float, str), None, "processing window start: every input is cut "
+                       "to the window before anything runs (insgnss.job.span; KF-GINS "
+                       "starttime); a GPS time needs time_base gps, sow or unix_gpst",
+                       check=WINDOW_END),
+        "end": _spec((int, float, str), None, "processing window end (\"+SECONDS\": after the "
+                     "first IMU sample, as for start)", check=WINDOW_END),
     },
     "inputs": {
         "imu": {

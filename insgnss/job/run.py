@@ -1,7 +1,7 @@
-"""Running a job: read the inputs, prepare them (IMU table policies, outage windows,
-IMU time offset), then run the job's process (:mod:`.processes`) - once, or once per IMU
-segment in split mode (:mod:`.segments`, which gets :func:`run_job` passed in) - and
-(:func:`process`) write its outputs."""
+"""Running a job: read the inputs, prepare them (the processing window ``[job] start`` /
+``end``, IMU table policies, outage windows, IMU time offset), then run the job's process
+(:mod:`.processes`) - once, or once per IMU segment in split mode (:mod:`.segments`, which
+gets :func:`run_job` passed in) - and (:func:`process`) write its outputs."""
 
 from __future__ import annotations
 
@@ -17,6 +17,7 @@ from .outputs import write_outputs
 from .processes import run_process
 from .result import JobResult
 from .segments import run_segments
+from .span import cut_inputs, processing_window
 from .windows import outage_windows
 
 
@@ -30,14 +31,18 @@ def prepare(job: Job, *, progress: bool | None = None, seed: int | None = None,
     t_start = time.perf_counter()
     inputs = load_inputs(job, seed) if inputs is None else inputs
     t_read = time.perf_counter() - t_start
+    all_gnss = inputs.gnss  # outage windows follow the whole recording (span.py)
+    window = processing_window(job, inputs.imu)
+    if window is not None:  # [job] start / end
+        inputs = cut_inputs(inputs, window)
     # duplicates, gaps and segments of the table actually processed (policies.py)
     inputs.imu, imu_report = check_imu_table(inputs.imu, gap_policy(job),
                                              job["inputs"]["imu"]["duplicates"])
     check_job_against_data(job, imu_report["nominal_dt"],  # intervals, start time (config.py)
                            (float(inputs.imu.index[0]), float(inputs.imu.index[-1])))
     model = inputs.imu_model or imu_model(job, None)
-    windows = outage_windows(job, inputs.gnss)
-    preprocessing = {}
+    windows = outage_windows(job, all_gnss)
+    preprocessing = {} if window is None else {"processing_window": list(window)}
     if job["inputs"]["imu"]["estimate_time_offset"] and inputs.gnss is not None:
         dt, info = estimate_time_offset(inputs.imu, inputs.gnss, windows,
                                         min_speed=job["inputs"]["imu"]["time_offset_min_speed"])
