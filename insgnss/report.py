@@ -220,6 +220,10 @@ def summary_html(result, data: ReportData) -> str:
            ("GNSS outages", _outages_text(data)),
            ("reference", ", ".join(data.reference_kinds) if data.reference_kinds else "none")]
     parts.append("<h2 id='summary'>Summary</h2><h3>Run</h3>" + _kv(run))
+    if s.get("input_files"):  # what reproduces the run (insgnss.job.summary.provenance)
+        parts.append("<h3 id='input-files'>Input files</h3>" + table_html(pd.DataFrame(
+            [{"file": f.get("path"), "bytes": f.get("bytes"), "sha256": f.get("sha256")}
+             for f in s["input_files"]]), left=("file", "sha256")))
     if ini:
         parts.append("<h3>Initialization</h3>" + _kv([
             ("method", ini.get("method")), ("heading source", ini.get("heading_source")),

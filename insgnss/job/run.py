@@ -18,6 +18,7 @@ from .processes import run_process
 from .result import JobResult
 from .segments import run_segments
 from .span import cut_inputs, processing_window
+from .summary import provenance
 from .windows import outage_windows
 
 
@@ -70,9 +71,12 @@ def run_job(job: Job, *, progress: bool | None = None, seed: int | None = None,
     """Run a validated job in memory (no files written)."""
     ctx = prepare(job, progress=progress, seed=seed, inputs=inputs)
     if len(ctx.imu_report["segments"]) > 1:  # gap_policy = "split" and long gaps
-        return run_segments(ctx, lambda seg_job, seg_inputs: run_job(
+        res = run_segments(ctx, lambda seg_job, seg_inputs: run_job(
             seg_job, progress=progress, inputs=seg_inputs))
-    return run_process(ctx)
+    else:
+        res = run_process(ctx)
+    res.summary.update(provenance(job))  # version, resolved job, input checksums
+    return res
 
 
 def process(job: Job, out_dir: str | Path | None = None, *, progress: bool | None = None

@@ -1,11 +1,15 @@
-"""The summary of a run (``summary.json``, docs/jobs.md): what ran, how it was initialized,
+"""The summary of a run (``summary.json``, docs/jobs.md): what ran and with what
+(:func:`provenance`: insgnss version, the resolved job, the input files' SHA-256), how it was
+initialized,
 the measurements (offered, applied, rejected, recovered, unusable per type; see
 :mod:`.aiding`), the outage windows, timing and the evaluation figures; whether the run is
 complete and, if not, why (:func:`incomplete_reason`)."""
 
 from __future__ import annotations
 
+import hashlib
 import time
+from pathlib import Path
 
 import numpy as np
 
@@ -93,6 +97,29 @@ def filter_summary(out: JobResult, counts: dict, notes: list[str], model_name: s
     }
 
 
+def file_checksum(path: Path, chunk: int = 1 << 20) -> dict:
+    """``{"path", "bytes", "sha256"}`` of a file (read in chunks)."""
+    h = hashlib.sha256()
+    with open(path, "rb") as fh:
+        while block := fh.read(chunk):
+            h.update(block)
+    return {"path": str(path), "bytes": path.stat().st_size, "sha256": h.hexdigest()}
+
+
+def provenance(job: Job) -> dict:
+    """What reproduces a run: the insgnss ``version``, the fully resolved job
+    (``job_resolved``: every key with its default filled in, and the simulation tables of a
+    simulated job) and the SHA-256 of every input file, the job file included
+    (``input_files``)."""
+    from .. import __version__
+
+    resolved = dict(job.settings)
+    if job.simulation:
+        resolved["simulation"] = dict(job.simulation)
+    return {"version": __version__, "job_resolved": resolved,
+            "input_files": [file_checksum(p) for p in job.input_paths() if p.is_file()]}
+
+
 def measurement_rows(summary: dict) -> list[str]:
     """One line per measurement type of ``summary["measurements"]``, e.g. ``"gnss_pos: 1510 of
     1524 offered applied (14 rejected, 0 recovered by the gate recovery, 0 unusable)"``, then
@@ -120,5 +147,6 @@ def add_counts(parts: list[dict]) -> dict:
     return out
 
 
-__all__ = ["add_counts", "filter_summary", "incomplete_reason", "initialization_summary",
-           "job_name", "measurement_rows", "platform_summary", "status", "stopped_at"]
+__all__ = ["add_counts", "file_checksum", "filter_summary", "incomplete_reason",
+           "initialization_summary", "job_name", "measurement_rows", "platform_summary",
+           "provenance", "status", "stopped_at"]
