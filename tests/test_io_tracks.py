@@ -22,6 +22,7 @@ from insgnss.io import (
 )
 
 KML = "{http://www.opengis.net/kml/2.2}"
+GX = "{http://www.google.com/kml/ext/2.2}"
 
 
 def traj(n=40):
@@ -101,8 +102,8 @@ def test_kml_parses_back(tmp_path):
     pms = root.findall(f".//{KML}Placemark")
     names = [pm.find(KML + "name").text for pm in pms]
     assert names[:2] == ["forward", "smoothed <&>"] and len(names) == 2 + 3
-    coords = [[float(x) for x in c.split(",")]
-              for c in pms[1].find(f".//{KML}coordinates").text.split()]
+    # GPS time stamps: a gx:Track with a UTC time per sample
+    coords = [[float(x) for x in c.text.split()] for c in pms[1].findall(f".//{GX}coord")]
     idx = [0, 4, 8, 12, 16, 20, 24, 28, 29]
     np.testing.assert_allclose(np.array(coords)[:, 0], np.degrees(smo["lon"].to_numpy()[idx]), atol=1e-9)
     np.testing.assert_allclose(np.array(coords)[:, 1], np.degrees(smo["lat"].to_numpy()[idx]), atol=1e-9)
@@ -116,7 +117,8 @@ def test_geojson_parses_back(tmp_path):
     gnss = df.iloc[::5]
     p = write_geojson(df, tmp_path / "track.geojson", points=gnss)
     doc = json.loads(p.read_text())
-    assert doc["type"] == "FeatureCollection" and len(doc["features"]) == 2
+    # the line, one timed point per second of the track (0.25 s: one), the GNSS points
+    assert doc["type"] == "FeatureCollection" and len(doc["features"]) == 3
     line = doc["features"][0]
     assert line["geometry"]["type"] == "LineString"
     xyz = np.array(line["geometry"]["coordinates"])
@@ -124,7 +126,7 @@ def test_geojson_parses_back(tmp_path):
     np.testing.assert_allclose(xyz[:, 1], np.degrees(df["lat"]), atol=1e-9)
     np.testing.assert_allclose(xyz[:, 2], df["height"], atol=1e-3)
     assert line["properties"]["start_time"] == pytest.approx(T0_GPS)
-    pts = doc["features"][1]
+    pts = doc["features"][2]
     assert pts["geometry"]["type"] == "MultiPoint" and len(pts["geometry"]["coordinates"]) == 5
     assert pts["properties"]["times"] == pytest.approx(gnss.index.tolist())
 
@@ -183,3 +185,44 @@ def test_a_table_is_never_written_over_its_own_source(tmp_path):
     with pytest.raises(ConfigError):
         write_kml(traj(5), p, points=back)
     assert p.read_bytes() == before
+
+
+def _utc_iso(t_gps):
+    """ISO UTC of GPS seconds, computed independently: GPS - UTC = 18 s since 2017."""
+    d = np.datetime64("1980-01-06T00:00:00", "ms") + np.round(
+        (np.asarray(t_gps, float) - 18.0) * 1000).astype("timedelta64[ms]")
+    return [f"{x}Z" for x in np.datetime_as_string(d, unit="ms")]
+
+
+def test_kml_and_geojson_tracks_carry_utc_times(tmp_path):
+    """Google Earth animates a gx:Track by its <when> (UTC), QGIS's temporal controller the
+    Point features by their time; both from the GPS time stamps, leap seconds removed."""
+    t0 = T0_GPS  # 2025-07-08 19:34:18.499 GPST = 19:34:00.499 UTC
+    df = traj(400).iloc[::10]  # 0.1 s apart, 4 s
+    root = ET.parse(write_kml({"forward": df}, tmp_path / "t.kml")).getroot()
+    track = root.find(f".//{GX}Track")
+    when = [w.text for w in track.findall(f"{KML}when")]
+    assert when[0] == "2025-07-08T19:34:00.499Z"
+    assert when == _utc_iso(df.index)
+    assert len(track.findall(f"{GX}coord")) == len(df)
+    doc = json.loads(write_geojson({"forward": df}, tmp_path / "t.geojson").read_text())
+    line = doc["features"][0]
+    assert line["properties"]["coordTimes"] == _utc_iso(df.index)
+    assert line["properties"]["times"] == pytest.approx(df.index.tolist())
+    pts = [f for f in doc["features"] if f["geometry"]["type"] == "Point"]
+    assert [p["properties"]["t"] for p in pts] == pytest.approx(t0 + np.arange(4.0), abs=1e-6)
+    assert pts[1]["properties"]["time"] == "2025-07-08T19:34:01.499Z"
+    assert pts[1]["geometry"]["coordinates"][1] == pytest.approx(
+        np.degrees(df["lat"].iloc[10]), abs=1e-9)
+    # seconds of week with the week known; and a relative clock: no calendar time
+    sow = df.set_axis(df.index - 2374 * 604800.0, axis=0)
+    sow.attrs = {"time_base": "sow", "gps_week": 2374}
+    root = ET.parse(write_kml(sow, tmp_path / "s.kml")).getroot()
+    assert root.find(f".//{KML}when").text == "2025-07-08T19:34:00.499Z"
+    rel = df.set_axis(df.index - t0, axis=0)
+    rel.attrs = {"time_base": "unspecified"}
+    root = ET.parse(write_kml(rel, tmp_path / "r.kml")).getroot()
+    assert root.find(f".//{GX}Track") is None and root.find(f".//{KML}LineString") is not None
+    doc = json.loads(write_geojson(rel, tmp_path / "r.geojson").read_text())
+    assert "coordTimes" not in doc["features"][0]["properties"]
+    assert doc["features"][1]["properties"]["time"] == pytest.approx(0.0)

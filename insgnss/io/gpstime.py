@@ -72,6 +72,15 @@ def gps_seconds_from_utc(t_utc: np.ndarray) -> np.ndarray:
     return gps_seconds_from_datetime64(t_utc) + gps_minus_utc(t_utc)
 
 
+def utc_from_gps_seconds(t) -> np.ndarray:
+    """UTC calendar times (``datetime64[ns]``) from GPS seconds, leap seconds removed (the
+    inverse of :func:`gps_seconds_from_utc`)."""
+    gpst = datetime64_from_gps_seconds(t)
+    leap = gps_minus_utc(gpst)  # GPS - UTC at a time at most 18 s late: iterate once
+    leap = gps_minus_utc(gpst - (leap * 1e9).astype("timedelta64[ns]"))
+    return gpst - (leap * 1e9).astype("timedelta64[ns]")
+
+
 def gps_seconds_from_week_sow(week, sow) -> np.ndarray:
     """GPS seconds from GPS week and seconds of week."""
     return np.asarray(week, float) * WEEK_SECONDS + np.asarray(sow, float)

@@ -10,11 +10,19 @@ path listed in ``protect`` (the run's inputs, :func:`insgnss.validate.ensure_not
 - **Scorer CSV** (``shared/eval`` input): ``time_gpst_s lat_deg lon_deg height_m`` and, when the
   table has attitude, ``roll_deg pitch_deg yaw_deg`` (FRD body relative to NED, via
   :func:`insgnss.attitude.euler_to_ned`).
-- **KML 2.2**: one ``LineString`` placemark per track (``lon,lat,height`` in degrees and metres;
-  KML heights are above mean sea level, so the default altitude mode clamps to the ground) and
-  optional point placemarks (e.g. GNSS epochs).
-- **GeoJSON** (RFC 7946): a FeatureCollection with one ``LineString`` feature per track and an
-  optional ``MultiPoint`` feature; positions ``[lon, lat, height]``.
+- **KML 2.2**: one placemark per track (``lon,lat,height`` in degrees and metres; KML heights
+  are above mean sea level, so the default altitude mode clamps to the ground) and optional
+  point placemarks (e.g. GNSS epochs). A track whose times are absolute (time base ``gps``,
+  ``unix_gpst``, or ``sow`` with a known week) is a Google ``gx:Track``: a ``<when>`` (UTC,
+  ISO 8601) per ``<gx:coord>``, so Google Earth shows the time slider and animates it (and
+  GDAL's LIBKML driver, QGIS, read its time stamps); other tracks are a ``LineString``.
+- **GeoJSON** (RFC 7946): a FeatureCollection with one ``LineString`` feature per track, whose
+  ``properties.times`` holds the time of every vertex [s, the table's time base] and, with
+  absolute times, ``properties.coordTimes`` the UTC ISO 8601 time of every vertex (the
+  convention of Mapbox's togeojson for ``gx:Track``); then, per track, ``Point`` features at
+  ``point_interval`` seconds with a ``time`` property (UTC ISO 8601, else seconds) and ``t``
+  [s], which QGIS's temporal controller animates ("single field with date/time": ``time``);
+  and an optional ``MultiPoint`` feature; positions ``[lon, lat, height]``.
 """
 
 from __future__ import annotations
@@ -44,6 +52,7 @@ from .gpstime import to_gps_seconds
 from .native import atomic_write, csv_writer, from_file_columns, to_file_columns
 
 KML_NS = "http://www.opengis.net/kml/2.2"
+GX_NS = "http://www.google.com/kml/ext/2.2"
 ALTITUDE_MODES = ("clampToGround", "relativeToGround", "absolute")
 
 
@@ -167,13 +176,37 @@ def _tracks(tracks) -> dict[str, pd.DataFrame]:
 
 
 def _decimate(v: np.ndarray, every: int) -> np.ndarray:
+    return v[_decimated(len(v), every)]
+
+
+def _decimated(n: int, every: int) -> np.ndarray:
+    """Indices of every ``every``-th of ``n`` samples and the last."""
     if not isinstance(every, (int, np.integer)) or every < 1:
         raise ConfigError("decimation must be a positive integer", column="decimate",
                           found=repr(every))
-    if every == 1 or len(v) <= 2:
-        return v
-    idx = np.unique(np.concatenate([np.arange(0, len(v), every), [len(v) - 1]]))
-    return v[idx]
+    if every == 1 or n <= 2:
+        return np.arange(n)
+    return np.unique(np.concatenate([np.arange(0, n, every), [n - 1]]))
+
+
+def utc_times(df: pd.DataFrame, time_base: str | None = None,
+              week: int | None = None) -> np.ndarray | None:
+    """UTC ``datetime64[ns]`` of a table's index when its time base is absolute (``gps``,
+    ``unix_gpst``, or ``sow`` with ``week`` / ``attrs["gps_week"]``); None otherwise."""
+    from .gpstime import utc_from_gps_seconds
+
+    base = time_base or df.attrs.get("time_base")
+    week = week if week is not None else df.attrs.get("gps_week")
+    if base not in ("gps", "unix_gpst", "sow") or (base == "sow" and week is None):
+        return None
+    return utc_from_gps_seconds(to_gps_seconds(np.asarray(df.index, float), base,
+                                               None if week is None else int(week)))
+
+
+def _iso(t: np.ndarray) -> list[str]:
+    """ISO 8601 UTC strings (rounded to the millisecond, ``Z``)."""
+    ms = (np.asarray(t, "datetime64[ns]") + np.timedelta64(500_000, "ns")).astype("datetime64[ms]")
+    return [f"{x}Z" for x in np.datetime_as_string(ms, unit="ms")]
 
 
 def write_kml(tracks: pd.DataFrame | Mapping[str, pd.DataFrame], path: str | os.PathLike, *,
@@ -181,11 +214,14 @@ def write_kml(tracks: pd.DataFrame | Mapping[str, pd.DataFrame], path: str | os.
               points_name: str = "GNSS", colors: Sequence[str] = ("ff0000ff", "ffff0000",
                                                                    "ff00ff00", "ff00ffff"),
               width: float = 2.0, altitude_mode: str = "clampToGround", decimate: int = 1,
-              protect: Sequence[str | os.PathLike] = ()) -> Path:
+              protect: Sequence[str | os.PathLike] = (), time_base: str | None = None,
+              week: int | None = None) -> Path:
     """Write tracks (and optional points) as a KML 2.2 document (atomically).
 
     ``colors`` are KML ``aabbggrr`` strings used in turn per track; ``decimate`` keeps every
-    n-th sample (and the last).
+    n-th sample (and the last). Tracks with absolute times are ``gx:Track`` elements with a
+    UTC time per sample (module docstring); ``time_base`` / ``week`` override the tables'
+    ``attrs``.
     """
     if altitude_mode not in ALTITUDE_MODES:
         raise ConfigError("unknown altitude mode", column="altitude_mode",
@@ -193,12 +229,15 @@ def write_kml(tracks: pd.DataFrame | Mapping[str, pd.DataFrame], path: str | os.
     tr = _tracks(tracks)
     ensure_not_input(path, [*protect, *_sources(tr, points)])
     ET.register_namespace("", KML_NS)
-    q = f"{{{KML_NS}}}"
+    ET.register_namespace("gx", GX_NS)
+    q, gx = f"{{{KML_NS}}}", f"{{{GX_NS}}}"
     kml = ET.Element(q + "kml")
     doc = ET.SubElement(kml, q + "Document")
     ET.SubElement(doc, q + "name").text = name
     for k, (tname, df) in enumerate(tr.items()):
-        v = _decimate(_llh_deg(df, f"track {tname!r}"), decimate)
+        idx = _decimated(len(df), decimate)
+        v = _llh_deg(df, f"track {tname!r}")[idx]
+        utc = utc_times(df, time_base, week)
         style = ET.SubElement(doc, q + "Style", id=f"track{k}")
         ls = ET.SubElement(style, q + "LineStyle")
         ET.SubElement(ls, q + "color").text = colors[k % len(colors)]
@@ -206,6 +245,14 @@ def write_kml(tracks: pd.DataFrame | Mapping[str, pd.DataFrame], path: str | os.
         pm = ET.SubElement(doc, q + "Placemark")
         ET.SubElement(pm, q + "name").text = tname
         ET.SubElement(pm, q + "styleUrl").text = f"#track{k}"
+        if utc is not None:  # a time per sample: Google Earth animates it
+            track = ET.SubElement(pm, gx + "Track")
+            ET.SubElement(track, q + "altitudeMode").text = altitude_mode
+            for w in _iso(utc[idx]):
+                ET.SubElement(track, q + "when").text = w
+            for a, b, c in v:
+                ET.SubElement(track, gx + "coord").text = f"{a:.9f} {b:.9f} {c:.3f}"
+            continue
         line = ET.SubElement(pm, q + "LineString")
         ET.SubElement(line, q + "tessellate").text = "1"
         ET.SubElement(line, q + "altitudeMode").text = altitude_mode
@@ -227,22 +274,44 @@ def write_kml(tracks: pd.DataFrame | Mapping[str, pd.DataFrame], path: str | os.
 
 def write_geojson(tracks: pd.DataFrame | Mapping[str, pd.DataFrame], path: str | os.PathLike, *,
                   points: pd.DataFrame | None = None, points_name: str = "GNSS",
-                  decimate: int = 1, protect: Sequence[str | os.PathLike] = ()) -> Path:
-    """Write tracks (and optional points) as a GeoJSON FeatureCollection (atomically)."""
+                  decimate: int = 1, point_interval: float | None = 1.0,
+                  protect: Sequence[str | os.PathLike] = (), time_base: str | None = None,
+                  week: int | None = None) -> Path:
+    """Write tracks (and optional points) as a GeoJSON FeatureCollection (atomically).
+
+    Every vertex has its time (module docstring); ``point_interval`` [s] is the spacing of the
+    timed ``Point`` features per track (None: none); ``time_base`` / ``week`` override the
+    tables' ``attrs``.
+    """
     tr = _tracks(tracks)
     ensure_not_input(path, [*protect, *_sources(tr, points)])
-    features = []
+    features, timed = [], []
     for tname, df in tr.items():
-        v = _decimate(_llh_deg(df, f"track {tname!r}"), decimate)
+        idx = _decimated(len(df), decimate)
+        v = _llh_deg(df, f"track {tname!r}")[idx]
         t = np.asarray(df.index, float)
-        features.append({
-            "type": "Feature",
-            "properties": {"name": tname, "start_time": float(t[0]) if t.size else None,
-                           "end_time": float(t[-1]) if t.size else None,
-                           "time_base": df.attrs.get("time_base", "unspecified")},
-            "geometry": {"type": "LineString",
-                         "coordinates": _rounded(v)},
-        })
+        utc = utc_times(df, time_base, week)
+        props = {"name": tname, "start_time": float(t[0]) if t.size else None,
+                 "end_time": float(t[-1]) if t.size else None,
+                 "time_base": time_base or df.attrs.get("time_base", "unspecified"),
+                 "times": np.round(t[idx], 6).tolist()}
+        if utc is not None:
+            props["coordTimes"] = _iso(utc[idx])
+        features.append({"type": "Feature", "properties": props,
+                         "geometry": {"type": "LineString", "coordinates": _rounded(v)}})
+        if point_interval is not None and t.size:
+            if not point_interval > 0:
+                raise ConfigError("point interval must be > 0 s", column="point_interval",
+                                  found=repr(point_interval))
+            k = idx[np.concatenate([[True], np.diff(np.floor((t[idx] - t[0]) /
+                                                             point_interval)) > 0])]
+            stamps = _iso(utc[k]) if utc is not None else [float(x) for x in t[k]]
+            xyz = _rounded(_llh_deg(df, f"track {tname!r}")[k])
+            timed += [{"type": "Feature",
+                       "properties": {"track": tname, "time": s, "t": float(tk)},
+                       "geometry": {"type": "Point", "coordinates": c}}
+                      for s, tk, c in zip(stamps, t[k], xyz, strict=True)]
+    features += timed
     if points is not None:
         v = _llh_deg(points, points_name)
         features.append({
