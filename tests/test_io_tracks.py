@@ -226,3 +226,29 @@ def test_kml_and_geojson_tracks_carry_utc_times(tmp_path):
     doc = json.loads(write_geojson(rel, tmp_path / "r.geojson").read_text())
     assert "coordTimes" not in doc["features"][0]["properties"]
     assert doc["features"][1]["properties"]["time"] == pytest.approx(0.0)
+
+
+def test_job_outputs_timed_tracks(tmp_path):
+    """A job on GPS-time data writes animated tracks: forward.kml's gx:Track and
+    forward.geojson's coordTimes hold the UTC times of the written samples."""
+    from example_data import T0, generate_for
+
+    from insgnss.config import load_job_dict
+    from insgnss.pipeline import run_job, write_outputs
+
+    job, _ = generate_for({"job": {"time_base": "gps"},
+                           "inputs": {"imu": {"format": "native", "path": "imu.csv"},
+                                      "gnss": {"format": "rtklib_pos", "path": "gnss.pos"}},
+                           "initialization": {"static_duration": 20.0},
+                           "outputs": {"report": False, "progress": False,
+                                       "formats": ["csv", "kml", "geojson"]}}, tmp_path)
+    res = run_job(load_job_dict(job, tmp_path / "job.toml"), progress=False)
+    write_outputs(res, tmp_path / "out")
+    root = ET.parse(tmp_path / "out" / "forward.kml").getroot()
+    when = [w.text for w in root.iter(f"{KML}when")]
+    csv = read_table(tmp_path / "out" / "forward.csv")
+    assert len(when) == len(csv) and when == _utc_iso(csv.index)
+    assert when[0].startswith("2025-07-08T19:33:42")  # T0 = 19:34:00 GPST, UTC 18 s earlier
+    doc = json.loads((tmp_path / "out" / "smoothed.geojson").read_text())
+    assert doc["features"][0]["properties"]["coordTimes"][0] == when[0]
+    assert T0 <= csv.index[0] < T0 + 30

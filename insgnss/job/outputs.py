@@ -55,6 +55,10 @@ def write_outputs(result: JobResult, out_dir: str | Path | None = None) -> dict[
         # jumps there; insgnss.columns)
         epochs = [x.index for x in (result.inputs.gnss, result.inputs.control_points)
                   if x is not None]
+        # the time base of the data, for the UTC time stamps of the KML / GeoJSON tracks
+        base = result.inputs.imu.attrs.get("time_base")
+        clock = {"time_base": job["job"]["time_base"] if base in (None, "unspecified")
+                 else base, "week": result.inputs.imu.attrs.get("gps_week")}
         for name, df in tables.items():
             if df is None:
                 continue
@@ -74,11 +78,11 @@ def write_outputs(result: JobResult, out_dir: str | Path | None = None) -> dict[
             if "kml" in formats:
                 from ..io.tracks import write_kml
 
-                write_kml({name: df}, dest(f"{name}.kml"))
+                write_kml({name: df}, dest(f"{name}.kml"), **clock)
             if "geojson" in formats:
                 from ..io.tracks import write_geojson
 
-                write_geojson({name: df}, dest(f"{name}.geojson"))
+                write_geojson({name: df}, dest(f"{name}.geojson"), **clock)
             if "eval" in formats:
                 from ..io.tracks import write_eval_csv
 

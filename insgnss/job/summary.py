@@ -111,7 +111,7 @@ def provenance(job: Job) -> dict:
     (``job_resolved``: every key with its default filled in, and the simulation tables of a
     simulated job) and the SHA-256 of every input file, the job file included
     (``input_files``)."""
-    from .. import __version__
+    from .._version import __version__
 
     resolved = dict(job.settings)
     if job.simulation:
