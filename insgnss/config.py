@@ -577,6 +577,9 @@ SCHEMA: dict[str, Any] = {
                           when=_is("initialization.method", "given", "gnss_velocity")),
         "pitch_deg": _spec(_NUM, None, "given pitch", check=_number(-90.0, 90.0),
                            when=_is("initialization.method", "given", "gnss_velocity")),
+        "velocity": _spec(list, None, "given initial velocity east, north, up [m/s] "
+                          "(default: at rest)", check=_vector(3),
+                          when=_is("initialization.method", "given")),
         "min_speed": _spec(_NUM, 3.0, "speed for GNSS-velocity heading [m/s]", check=POSITIVE,
                            when=_is("initialization.method", "static", "gnss_velocity")),
         "course_heading_std_deg": _spec(_NUM, 3.0, "heading sigma when the heading comes from "

@@ -21,6 +21,7 @@ _MODULES = {
     ".native": ("atomic_write", "atomic_write_text", "decimate_table", "read_table",
                 "select_output_columns", "write_parquet", "write_table"),
     ".nmea": ("read_nmea",),
+    ".pyins_frames": ("from_pyins", "to_pyins"),
     ".reference": ("read_reference",),
     ".rtklib": ("TimeTag", "read_rtklib_pos", "read_rtklib_tag"),
     ".rtklibexplorer": ("DRIVE_0708", "WALK_0827", "read_rtklibexplorer_imu",

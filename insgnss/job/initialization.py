@@ -9,7 +9,8 @@
   position and velocity, heading = course over ground (no side slip), roll/pitch from the
   accelerometers averaged over 1 s with the vehicle's acceleration over that second (GNSS
   velocity difference) removed (:func:`insgnss.align.level_moving`), or given;
-- ``given``: roll, pitch, heading given; position from the first GNSS epoch.
+- ``given``: roll, pitch, heading (and ``velocity``, default at rest) given; position from
+  the first GNSS epoch.
 
 The static window is found in the data (:func:`insgnss.detect.find_static_windows`, with the
 stillness limits ``static_max_accel_std`` / ``static_max_rate_std_deg`` of the platform
@@ -274,7 +275,8 @@ def _initialize(job: Job, inputs: Inputs, model: ImuErrorModel, windows) -> Init
                               file=job.path, column="initialization")
         r, p, h = np.radians(given)
         C = euler_to_dcm(r, p, h)
-        st = NavState(*position_at(t0, C), np.zeros(3), C, t0)
+        vel = np.zeros(3) if ini["velocity"] is None else np.asarray(ini["velocity"], float)
+        st = NavState(*position_at(t0, C), vel, C, t0)
         return Initialization(st, method, "given", pos_std=pos_std)
     # static
     win, static_info, noise_window = _static_window(job, imu, all_gnss, windows, t0)
