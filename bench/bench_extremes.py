@@ -1,4 +1,4 @@
-"""Every job value at its documented extreme (issue 12): complete, or refuse cleanly.
+"""Every job value at its documented extreme: complete, or refuse cleanly.
 
 A simulated car drive (default 5 minutes: static start, turns, a stop; consumer MEMS IMU at
 100 Hz, 1 Hz GNSS position and velocity, 10 Hz odometer) is processed with every number the

@@ -1,4 +1,4 @@
-"""Benchmark of the error-state filter + smoother (issue 4) and its full Monte Carlo check.
+"""Benchmark of the error-state filter + RTS smoother and its full Monte Carlo check.
 
     python bench/bench_filter.py                 # 1 h, 200 Hz IMU + 1 Hz GNSS pos/vel
     python bench/bench_filter.py --hours 0.25    # shorter

@@ -1,4 +1,4 @@
-"""Benchmark: the whole ``insgnss process`` run as a user runs it (issue: whole-process speed).
+"""Benchmark: the whole ``insgnss process`` run as a user runs it.
 
 Each run is a child process ``insgnss process JOB -o OUT --no-progress`` of this checkout
 (``PYTHONPATH`` set to it). Measured per run: wall time, peak resident memory of the child

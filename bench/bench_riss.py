@@ -1,5 +1,5 @@
 """RISS benchmark: throughput of the mechanization kernel and of the RISS/GNSS filter, and the
-full-size NEES Monte Carlo of issue 7 (50 runs of a 10-minute land-vehicle drive per grade).
+full-size NEES Monte Carlo (50 runs of a 10-minute land-vehicle drive per grade).
 
 The drive, the sensor-error synthesis and the NEES bookkeeping are those of the tests
 (``tests/riss_helpers.py``): errors are drawn from the filter's own model (turn-on bias +

@@ -1,4 +1,4 @@
-"""Bad input on the real drive (issue 8): GNSS jumps and bursts, dropped IMU samples and gaps.
+"""Bad input on the real drive: GNSS jumps and bursts, dropped IMU samples and gaps.
 
 Runs ``scenarios/drive_0708.toml`` on inputs corrupted in memory (the reference stays the clean
 Q=1 RTK file) and prints, per case, the errors relative to the clean run and what the gate did:

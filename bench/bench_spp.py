@@ -1,4 +1,4 @@
-"""Single-point positioning on the rtklibexplorer walk's raw u-blox stream (issue 19).
+"""Single-point positioning on the rtklibexplorer walk's raw u-blox stream.
 
 Reads ``walk_0827/gnss_1730.ubx`` (RAWX + SFRBX + NAV-PVT), decodes the broadcast ephemerides,
 runs SPP (GPS L1 C/A + Galileo E1 + BeiDou B3I, Klobuchar, Saastamoinen/Niell, FDE) and prints

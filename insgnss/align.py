@@ -1,7 +1,7 @@
 """Initial alignment: accelerometer levelling, gyrocompassing, heading from GNSS velocity or a
 tilt-compensated magnetometer.
 
-Static coarse alignment (seed 000 eqs. 1-6; Noureldin et al. 2013 section 5.6; Groves 2013
+Static coarse alignment (Noureldin et al. 2013 section 5.6; Groves 2013
 section 5.6). At rest the mean specific force and angular rate in the body frame (RFU) are::
 
     f^b = C_l^b (0, 0, g)              ->  roll  = atan2(-f_x, f_z)
@@ -9,7 +9,7 @@ section 5.6). At rest the mean specific force and angular rate in the body frame
     w^b = C_l^b (0, we cos L, we sin L)  -> levelled w' = Rx(p) Ry(r) w^b  (eqs. 3-4)
                                            heading = atan2(-w'_x, w'_y)    (eq. 5)
 
-(the seed's ``asin`` forms of eqs. 1-2 are equivalent for |tilt| < 90 deg; ``atan2`` keeps full
+(the ``asin`` forms of the levelling equations are equivalent for |tilt| < 90 deg; ``atan2`` keeps full
 precision near +-90 deg and needs no ``sign(f_z)``).
 
 Expected accuracy (Groves eqs. 5.107-5.108): the tilt error is dominated by the horizontal
@@ -87,7 +87,7 @@ def level_moving(f_mean, accel_enu, heading: float, iterations: int = 4
 
 
 def gyrocompass(w_mean, roll: float, pitch: float) -> float:
-    """Heading [rad, 0..2pi) from the mean angular rate of a static IMU (seed eqs. 3-5)."""
+    """Heading [rad, 0..2pi) from the mean angular rate of a static IMU (gyrocompassing)."""
     wl = Rx(pitch) @ Ry(roll) @ np.asarray(w_mean, float)
     return float(np.mod(np.arctan2(-wl[0], wl[1]), 2 * np.pi))
 

@@ -5,9 +5,9 @@ Conventions (docs/conventions.md):
 - navigation frame l = ENU, body frame b = right-forward-up (RFU);
 - ``C`` (or ``C_b^l``) rotates body vectors into ENU: ``v^l = C v^b``;
 - Euler angles ``roll r, pitch p, heading A`` (heading clockwise from north) with
-  ``C_b^l = Rz(-A) Rx(p) Ry(r)`` (seed 000 eq. 6), where ``Rx, Ry, Rz`` are the active
+  ``C_b^l = Rz(-A) Rx(p) Ry(r)`` (Noureldin et al. 2013, ch. 2), where ``Rx, Ry, Rz`` are the active
   (right-handed, counter-clockwise) elementary rotations;
-- quaternions are scalar-last ``(x, y, z, w)`` as in seed 000 eq. 7 and scipy;
+- quaternions are scalar-last ``(x, y, z, w)`` as in scipy;
 - rotation vectors: ``C = exp([phi x])`` (Rodrigues).
 
 All public functions are vectorised over leading axes: Euler angles may be arrays of shape
@@ -71,7 +71,7 @@ def skew(v) -> np.ndarray:
 
 
 def euler_to_dcm(roll, pitch, heading) -> np.ndarray:
-    """``C_b^l = Rz(-A) Rx(p) Ry(r)`` from roll, pitch, heading [rad] (seed 000 eq. 6)."""
+    """``C_b^l = Rz(-A) Rx(p) Ry(r)`` from roll, pitch, heading [rad]."""
     sr, cr = np.sin(_arr(roll)), np.cos(_arr(roll))
     sp, cp = np.sin(_arr(pitch)), np.cos(_arr(pitch))
     sa, ca = np.sin(_arr(heading)), np.cos(_arr(heading))
@@ -107,7 +107,7 @@ def euler_to_dcm_nb(roll, pitch, heading, C):
 
 
 def dcm_to_euler(C) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Roll, pitch, heading [rad] from ``C_b^l`` (seed 000 eqs. 19-21).
+    """Roll, pitch, heading [rad] from ``C_b^l`` (the inverse of :func:`euler_to_dcm`).
 
     Heading is wrapped to [0, 2 pi); roll to (-pi, pi]; pitch to [-pi/2, pi/2].
     """
@@ -162,7 +162,7 @@ def dcm_to_quat(C) -> np.ndarray:
 
 
 def quat_to_dcm(q) -> np.ndarray:
-    """DCM from a quaternion (x, y, z, w); the quaternion is normalised first (seed eq. 9)."""
+    """DCM from a quaternion (x, y, z, w); the quaternion is normalised first."""
     q = _arr(q)
     q = q / np.linalg.norm(q, axis=-1, keepdims=True)
     x, y, z, w = q[..., 0], q[..., 1], q[..., 2], q[..., 3]

@@ -608,7 +608,7 @@ def imu_rates(imu: pd.DataFrame) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     Rate tables are returned as sampled. Every noise-sensitive consumer (the detectors'
     statistics and their noise levels, static-window noise estimates) uses these arrays, never the
     trapezoidal increments of :func:`insgnss.imu.increments`, whose averaging of neighbouring
-    samples halves the variance of white noise (issue 20).
+    samples halves the variance of white noise.
     """
     t = np.asarray(imu.index, dtype=float)
     if is_increment_table(imu):

@@ -14,7 +14,7 @@ References
 - Groves, *Principles of GNSS, Inertial and Multisensor Integrated Navigation Systems*, 2nd ed.,
   2013, eqs. 2.105-2.113 (radii, ECEF), 2.134 (Somigliana), 2.139 (height correction).
 - Moritz, "Geodetic Reference System 1980", Bull. Geod. 54 (1980) - series coefficients a1..a6
-  as used in seed report 000 eq. 12 (Heiskanen & Moritz 1967 form).
+  in the Heiskanen & Moritz (1967) form.
 """
 
 from __future__ import annotations
@@ -38,7 +38,7 @@ GAMMA_P = 9.8321849378  #: normal gravity at the poles [m/s^2]
 K_SOMIGLIANA = (B * GAMMA_P - A * GAMMA_E) / (A * GAMMA_E)
 M_RATIO = OMEGA_E**2 * A**2 * B / GM  #: m = omega^2 a^2 b / GM
 
-# GRS80 series of seed 000 eq. 12 (Heiskanen & Moritz; coefficients as in El-Sheimy's notes)
+# GRS80 series (Heiskanen & Moritz; coefficients as in El-Sheimy's notes)
 GRS80_A1 = 9.7803267714
 GRS80_A2 = 0.0052790414
 GRS80_A3 = 0.0000232718
@@ -46,7 +46,7 @@ GRS80_A4 = -0.000003087691089
 GRS80_A5 = 0.000000004397731
 GRS80_A6 = 0.000000000000721
 
-# seed 004 eqs. 6-7: international gravity formula on the ellipsoid, inverse-square in height
+# international gravity formula on the ellipsoid, inverse-square in height
 IGF_G0 = 9.780327
 IGF_B1 = 0.0053024
 IGF_B2 = 0.0000058
@@ -140,7 +140,7 @@ def _grs80_series(s2, h):
 
 @njit(cache=True)
 def gravity_grs80_series(lat, h):
-    """Normal gravity magnitude [m/s^2] by the GRS80 series of seed 000 eq. 12:
+    """Normal gravity magnitude [m/s^2] by the GRS80 series (Heiskanen & Moritz 1967):
     ``g = a1 (1 + a2 sin^2 phi + a3 sin^4 phi) + (a4 + a5 sin^2 phi) h + a6 h^2``."""
     return _grs80_series(np.sin(lat) ** 2, h)
 
@@ -157,13 +157,13 @@ def _inverse_square(s2, h):
 
 @njit(cache=True)
 def gravity_inverse_square(lat, h):
-    """Normal gravity [m/s^2] of seed 004 eqs. 6-7: the international gravity formula on the
+    """Normal gravity [m/s^2]: the international gravity formula on the
     ellipsoid, ``g0 = 9.780327 (1 + 0.0053024 sin^2 lat - 0.0000058 sin^2 2 lat)``, decreasing
     with the inverse square of the distance from a centre at the Gaussian mean radius of
     curvature ``R_G = sqrt(M N)`` below the surface: ``g = g0 R_G^2 / (R_G + h)^2``.
 
-    (The seed prints ``R_G = 6367.449 km``, which is the rectifying radius, and adds the height
-    in km; the physics is the geometric mean radius of the point, as in its section 5.)
+    (Course notes print ``R_G = 6367.449 km`` with this formula: that is the rectifying radius,
+    not the radius of the point; the physics is the geometric mean radius of the point.)
     Within 2.2e-6 m/s^2 of Somigliana at the surface; its free-air gradient ``2 g / R_G`` is
     0.34 % below the normal one.
     """
@@ -186,7 +186,7 @@ def _j2(sl, cl, h):
 
 @njit(cache=True)
 def gravity_j2(lat, h):
-    """Normal gravity [m/s^2] of the J2 field (seed 004 eq. 9 done as in Groves eq. 2.142):
+    """Normal gravity [m/s^2] of the J2 field (Groves eq. 2.142):
     gravitation ``-GM/r^3 (r + 3/2 J2 a^2/r^2 ((1 - 5 z^2/r^2) x, (1 - 5 z^2/r^2) y,
     (3 - 5 z^2/r^2) z))`` plus the centrifugal ``w_ie^2 (x, y, 0)``, projected on the ellipsoid
     normal (the small deflection from the normal is not used by a mechanization). Within
@@ -223,8 +223,8 @@ def normal_gravity(lat, h, model: str | int = "somigliana"):
         Geodetic latitude [rad] and ellipsoidal height [m].
     model : str
         ``"somigliana"`` (default: closed form with the second-order height correction),
-        ``"grs80_series"`` (seed 000 eq. 12), ``"inverse_square"`` (seed 004 eqs. 6-7) or
-        ``"j2"`` (seed 004 eq. 9, the J2 gravitational field with the centrifugal term).
+        ``"grs80_series"`` (GRS80 series), ``"inverse_square"`` (international formula) or
+        ``"j2"`` (the J2 gravitational field with the centrifugal term).
     """
     mid = gravity_model_id(model)
     lat, h = np.asarray(lat, dtype=float), np.asarray(h, dtype=float)
@@ -236,7 +236,7 @@ def normal_gravity(lat, h, model: str | int = "somigliana"):
 
 @njit(cache=True)
 def radii(lat):
-    """Meridian radius M and prime-vertical radius N [m] (seed 000 eqs. 13-14).
+    """Meridian radius M and prime-vertical radius N [m] (Noureldin et al. 2013, ch. 2).
 
     Returns ``(M, N)``.
     """
@@ -255,7 +255,7 @@ def earth_rate_l(lat):
 
 @njit(cache=True)
 def transport_rate_l(lat, h, vel):
-    """Transport rate ``w_el^l`` of the ENU frame over the ellipsoid (seed 000 eq. 23).
+    """Transport rate ``w_el^l`` of the ENU frame over the ellipsoid (Noureldin et al. 2013, ch. 5).
 
     ``vel`` is the ENU velocity ``(ve, vn, vu)`` [m/s].
     """

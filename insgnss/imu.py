@@ -11,12 +11,12 @@ holding either
   holding the integral over the interval that *ends* at its time stamp.
 
 :func:`increments` turns either into the per-interval increments the mechanization consumes:
-rates are integrated with the trapezoidal rule (this is exactly the seed's eq. 25 applied to
+rates are integrated with the trapezoidal rule (the classic LLF mechanization's rule applied to
 angular rate and specific force), increments are taken as they are.
 
 Error model
 -----------
-Deterministic compensation (seed 000 eqs. 10-11)::
+Deterministic compensation (Noureldin et al. 2013, ch. 4)::
 
     x_hat = (I + S + N)^-1 (x - b)
 
@@ -139,7 +139,7 @@ def compensation_matrix(scale=0.0, nonorth=None) -> np.ndarray:
 
 
 def compensate(measurement, bias=0.0, scale=0.0, nonorth=None) -> np.ndarray:
-    """Deterministic compensation ``(I + S + N)^-1 (x - b)`` (seed 000 eqs. 10-11).
+    """Deterministic compensation ``(I + S + N)^-1 (x - b)`` (Noureldin et al. 2013, ch. 4).
 
     Parameters
     ----------

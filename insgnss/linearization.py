@@ -1,4 +1,4 @@
-"""Linearised error dynamics and their discretisation (seed 003, the ``inu`` package's
+"""Linearised error dynamics and their discretisation (as in the ``inu`` package's
 ``jacobian`` and ``vanloan``).
 
 - :func:`jacobian`: the continuous-time matrix ``F`` of insgnss' error-state model

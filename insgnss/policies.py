@@ -1,4 +1,4 @@
-"""Job-level input policies (issue 8): IMU gaps and duplicated samples.
+"""Job-level input policies: IMU gaps and duplicated samples.
 
 The readers validate what they read (:mod:`insgnss.validate`, docs/formats.md); the pipeline
 applies the same policies once more to the IMU table it is about to process, so that tables

@@ -42,7 +42,7 @@ Noise from a static window
 densities the filter needs. ``w`` and ``f`` are the samples as recorded
 (:func:`insgnss.detect.imu_rates`: rates as they are, increments divided by their interval),
 never the trapezoidal increments of the mechanization, whose averaging of neighbours would halve
-the variance of white noise (issue 20). On a vehicle with the engine running this captures the
+the variance of white noise. On a vehicle with the engine running this captures the
 vibration, which datasheet values do not.
 """
 

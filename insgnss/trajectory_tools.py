@@ -1,4 +1,4 @@
-"""Trajectory tools of seed 003 (the ``inu`` package): velocity from positions, attitude from
+"""Trajectory tools as in the ``inu`` package (D. Woodburn): velocity from positions, attitude from
 velocity, wind from ground velocity and heading.
 
 Conventions (docs/conventions.md) and how they differ from ``inu``
@@ -13,7 +13,7 @@ heading = yaw, see :mod:`insgnss.attitude`); use :func:`insgnss.attitude.enu_to_
 velocities. Arrays hold one sample per *row* (N, 3), not per column as in inu.
 
 References: Groves 2013 sections 2.4 and 5.3 (kinematics); Stevens, Lewis, Johnson 2016
-section 2.5 (coordinated turn ``tan(roll) = v omega / g``); inu documentation (seed 003).
+section 2.5 (coordinated turn ``tan(roll) = v omega / g``); inu documentation.
 """
 
 from __future__ import annotations
@@ -45,7 +45,7 @@ def _trapezoid_inverse(t, lat, dlon, h, v0, out):
 
 
 def llh_to_vne(llh, t=None, *, vel0=None, method: str = "trapezoid"):
-    """ENU velocity from geodetic positions over time (seed 003 ``llh_to_vne``).
+    """ENU velocity from geodetic positions over time (``inu.llh_to_vne``).
 
     Parameters
     ----------
@@ -128,7 +128,7 @@ def llh_to_vne(llh, t=None, *, vel0=None, method: str = "trapezoid"):
 # --- attitude from velocity ------------------------------------------------------------------
 def vne_to_rpy(vel, t=None, *, g=None, lat=None, height=0.0, turn_rate=None):
     """Roll, pitch and heading of a vehicle that flies along its velocity in coordinated turns
-    (seed 003 ``vne_to_rpy``).
+    (``inu.vne_to_rpy``).
 
     - heading = course ``atan2(v_e, v_n)`` (clockwise from north; held through samples with no
       horizontal speed);
@@ -192,7 +192,7 @@ def _window_sums(t, x, window):
 
 
 def est_wind(vel, heading, airspeed=None, *, t=None, window: float | None = None):
-    """Horizontal wind from ground velocity and heading (seed 003 ``est_wind``), for aircraft.
+    """Horizontal wind from ground velocity and heading (``inu.est_wind``), for aircraft.
 
     The ground velocity is the air velocity plus the wind, ``v_g = s (sin A, cos A) + w`` (no
     sideslip; ``s`` the horizontal true airspeed, ``A`` the heading).

@@ -35,7 +35,7 @@ recorded in the table's ``attrs``:
 - ``attrs["outside_imu_span"]``: ``[{"row", "time"}]`` GNSS epochs trimmed by
   :func:`check_gnss_in_imu_span`.
 
-Gap policy (issue 8): intervals longer than ``factor`` (1.5) nominal sample intervals are gaps,
+Gap policy: intervals longer than ``factor`` (1.5) nominal sample intervals are gaps,
 unless they are the clock's recurring jitter (:func:`jitter_envelope`: an interval length that at
 least 1 % of the intervals reach is the logger's time-stamp jitter, not a lost sample).
 Gaps up to ``max_bridge`` seconds (1.0 s) are bridged (the mechanization integrates across

@@ -274,7 +274,7 @@ def range_rate_variance(el, cn0, config: GnssModelConfig) -> np.ndarray:
 def keep_highest_satellites(prepared: pd.DataFrame, windows, n: int,
                             positions: pd.DataFrame) -> pd.DataFrame:
     """Inside the time ``windows`` keep only the ``n`` highest satellites of each epoch (the
-    partial-outage experiment of issue 19: a tight filter sees a few satellites where a loose
+    partial-outage experiment: a tight filter sees a few satellites where a loose
     one has no fix).
 
     Parameters

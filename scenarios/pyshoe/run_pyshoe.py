@@ -95,9 +95,34 @@ def score(data_dir: Path, out_dir: Path, scorer: Path = DEFAULT_SCORER) -> dict:
     return {r["trial"]: r for r in doc["trials"]}
 
 
+#: where the data comes from (said when the folder is missing)
+DATA_SOURCE = ("the PyShoe foot-mounted dataset (University of Toronto STARS Lab; Wagstaff, "
+               "Peretroukhin & Kelly, IEEE Sensors J. 20(2), 2019; open access on IEEE DataPort, "
+               "doi:10.21227/v1z6-9z84): download it and give the folder of its processed Vicon "
+               "trials (data/vicon/processed/*.mat) with --data")
+
+
+def check_paths(a) -> str | None:
+    """What is wrong with the paths of the command line (None: nothing)."""
+    if not a.data.is_dir():
+        return f"no data folder {a.data}: the trials are {DATA_SOURCE}"
+    if not any(a.data.glob("*.mat")):
+        return f"no .mat trial in {a.data}: expected {DATA_SOURCE}"
+    if a.config is not None and not a.config.is_file():
+        return f"no configuration file {a.config} (a TOML file with a [foot] table, e.g. " \
+               "scenarios/foot_mounted.toml)"
+    if not a.scorer.is_file():
+        return (f"no scorer {a.scorer}: the trials are scored by pyshoe_armse.py (the shared "
+                "evaluation scripts beside the repository, ../shared/eval/); give its path "
+                "with --scorer")
+    return None
+
+
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    p.add_argument("--data", type=Path, default=DEFAULT_DATA)
+    p.add_argument("--data", type=Path, default=DEFAULT_DATA,
+                   help="folder of the PyShoe Vicon trials (*.mat; default ../shared/data/"
+                   "pyshoe-vicon)")
     p.add_argument("--out", type=Path, default=Path("pyshoe_out"))
     p.add_argument("--config", type=Path, default=None, help="TOML with a [foot] table")
     p.add_argument("--scorer", type=Path, default=DEFAULT_SCORER)
@@ -105,6 +130,10 @@ def main(argv: list[str] | None = None) -> int:
                    "smoothed trajectory")
     p.add_argument("--json", action="store_true")
     a = p.parse_args(argv)
+    problem = check_paths(a)
+    if problem:
+        print(f"run_pyshoe.py: error: {problem}", file=sys.stderr)
+        return 2
     cfg = load_config(a.config)
     rows, t_nav = run_all(a.data, a.out, cfg, a.forward)
     scores = score(a.data, a.out, a.scorer)
