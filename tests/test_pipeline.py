@@ -150,7 +150,7 @@ def test_compare_cli_on_the_drive_job(drive_result, tmp_path):
     from insgnss.cli import main
 
     rc = main(["compare", str(_untuned_drive_job(tmp_path)), "-o", str(tmp_path),
-               "--runs", "free,job,job_smoothed", "--no-figures"])
+               "--only", "free,job,job_smoothed", "--no-figures"])
     assert rc == 0
     s = json.loads((tmp_path / "compare_summary.json").read_text())
     tab = s["table"]
@@ -164,7 +164,7 @@ def test_compare_full_imu_against_riss(tmp_path):
     from insgnss.cli import main
 
     rc = main(["compare", str(REPO / "scenarios" / "land_vehicle_odometer.toml"), "-o",
-               str(tmp_path), "--runs", "job,riss", "--no-figures"])
+               str(tmp_path), "--only", "job,riss", "--no-figures"])
     assert rc == 0
     tab = json.loads((tmp_path / "compare_summary.json").read_text())["table"]
     # consumer MEMS, two 90 s GNSS outages: RISS drifts far less than the full IMU (both with
