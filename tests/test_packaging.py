@@ -20,9 +20,6 @@ REPO = Path(__file__).resolve().parents[1]
 #: internal references that mean nothing to a reader of the documents
 INTERNAL = re.compile(r"seed (report|000|001|002|003|004|eq)|seed's|\bissue [0-9]+(?!\.[0-9])|\(issue\b|"
                       r"\bsession\b", re.I)
-#: modules whose docstrings their owners still have to rewrite (the mechanization's docstrings
-#: cite the course reports' equation numbers; it is maintained separately)
-NOT_YET = ("insgnss/mechanization/",)
 
 
 def test_licence_changelog_citation():
@@ -52,8 +49,6 @@ def test_documents_have_no_internal_references():
     hits = []
     for f in files:
         rel = f.relative_to(REPO).as_posix()
-        if rel.startswith(NOT_YET):
-            continue
         for k, line in enumerate(f.read_text().splitlines(), 1):
             if INTERNAL.search(line):
                 hits.append(f"{rel}:{k}: {line.strip()}")

@@ -84,7 +84,8 @@ class NavState:
         time: float = 0.0,
         degrees: bool = False,
     ) -> NavState:
-        """State from Euler angles (seed convention). ``degrees`` applies to lat, lon, angles."""
+        """State from Euler angles (roll, pitch, heading; docs/conventions.md). ``degrees`` applies to
+        lat, lon, angles."""
         k = np.pi / 180.0 if degrees else 1.0
         C = euler_to_dcm(roll * k, pitch * k, heading * k)
         check_latitude(lat * k, "lat")
@@ -143,7 +144,7 @@ def _matmul3(A, B, out):
 @njit(cache=True, inline="always")
 def body_rotation(dth, attitude_update, th):
     """The body rotation vector applied for the gyro increment ``dth``: ``dth`` itself (exact
-    update) or the seed's first-order quaternion angle ``2 atan(|dth|/2)`` (eq. 18)."""
+    update) or the angle ``2 atan(|dth|/2)`` of the normalised first-order quaternion update."""
     th[0], th[1], th[2] = dth[0], dth[1], dth[2]
     if attitude_update == ATTITUDE_FIRST_ORDER:
         k = first_order_angle_scale(np.sqrt(th[0] ** 2 + th[1] ** 2 + th[2] ** 2))
@@ -154,7 +155,7 @@ def body_rotation(dth, attitude_update, th):
 
 @njit(cache=True, inline="always")
 def velocity_update(vel, v0, C, th, dv, dt, wie, K, g, fix_height, Eb, El, Cm, A):
-    """Velocity over one interval (seed eq. 24, second order), ``vel`` updated in place.
+    """Velocity over one interval (second order), ``vel`` updated in place.
 
     With ``w_en = K v`` and the start velocity ``v0``::
 

@@ -5,28 +5,28 @@ transversal) and ``f_y`` (forward), and a forward-speed odometer ``v_od``. The v
 to move along its forward axis (no side slip, no vertical body velocity: the non-holonomic
 constraints of a land vehicle), so ``v^l = v_od C_b^l e_y``.
 
-Equations (seed report 001 eqs. 1-5; Noureldin, Karamat & Georgy 2013, ch. 14; Iqbal, Okou &
+Equations (Noureldin, Karamat & Georgy 2013, ch. 14; Iqbal, Okou &
 Noureldin, PLANS 2008). They follow from the LLF specific-force equation
 ``f^b = C_l^b (dv^l/dt + (2 w_ie^l + w_el^l) x v^l - g^l)`` with ``v^l = v_od C e_y`` and
 ``C = Rz(-A) Rx(p) Ry(r)``, whose third row is ``(-cos p sin r, sin p, cos p cos r)``:
 
-1. pitch (eq. 1)::
+1. pitch::
 
        f_y = a_od + g sin p + c_y        =>  p = asin((f_y - a_od - c_y) / g)
 
-2. roll (eq. 2; the centripetal acceleration of a turn is ``-v_od w_lb,z`` on the x axis)::
+2. roll (the centripetal acceleration of a turn is ``-v_od w_lb,z`` on the x axis)::
 
        f_x = -v_od w_lb,z - g cos p sin r + c_x  =>  r = -asin((f_x + v_od w_lb,z - c_x) / (g cos p))
 
-   ``c = C_l^b ((2 w_ie^l + w_el^l) x v^l)`` is the Coriolis/transport term (a few mm/s^2; the seed
-   neglects it, ``coriolis=False``) and ``w_lb,z = w_z - (C_l^b w_il^l)_z`` the gyro reading
+   ``c = C_l^b ((2 w_ie^l + w_el^l) x v^l)`` is the Coriolis/transport term (a few mm/s^2; the usual
+   textbook form neglects it, ``coriolis=False``) and ``w_lb,z = w_z - (C_l^b w_il^l)_z`` the gyro reading
    minus the Earth and transport rates seen by the body z axis.
 
 3. azimuth (heading clockwise from north). The body z rate relative to the l-frame in terms of
    Euler-angle rates is ``w_lb,z = -dA/dt cos p cos r + dp/dt sin r``, hence three variants:
 
-   - ``"level"`` (seed eq. 3, level vehicle): ``dA/dt = -(w_z - we sin(lat) - v_e tan(lat)/(N+h))``;
-   - ``"projected"`` (the seed report's final MATLAB code): the gyro multiplied by
+   - ``"level"`` (the textbook form, level vehicle): ``dA/dt = -(w_z - we sin(lat) - v_e tan(lat)/(N+h))``;
+   - ``"projected"`` (common in course implementations): the gyro multiplied by
      ``cos p cos r``: ``dA/dt = -(w_z cos p cos r - we sin(lat) - v_e tan(lat)/(N+h))``. This is
      the vertical projection of a body-z rate, the right correction only to first order: it errs
      by ``(1 - cos^2 p cos^2 r)`` of the turn rate, the same order as ``"level"`` but of the
@@ -35,10 +35,10 @@ Noureldin, PLANS 2008). They follow from the LLF specific-force equation
 
          dA/dt = (dp/dt sin r - w_lb,z) / (cos p cos r)
 
-4. velocity (eq. 4): ``v_e = v_od sin A cos p``, ``v_n = v_od cos A cos p``, ``v_u = v_od sin p``.
+4. velocity: ``v_e = v_od sin A cos p``, ``v_n = v_od cos A cos p``, ``v_u = v_od sin p``.
 
-5. position (eq. 5 with the correct radii; the seed's matrix puts M in the longitude row, which
-   is a typo): ``dlat/dt = v_n / (M + h)``, ``dlon/dt = v_e / ((N + h) cos lat)``, ``dh/dt = v_u``,
+5. position (meridian radius M in the latitude rate, prime-vertical radius N in the longitude
+   rate): ``dlat/dt = v_n / (M + h)``, ``dlon/dt = v_e / ((N + h) cos lat)``, ``dh/dt = v_u``,
    integrated by the trapezoidal rule exactly as :func:`insgnss.mechanization.strapdown.position_update`.
 
 Discretisation. Interval k is ``(t[k-1], t[k]]``. The gyro increment gives the exact mean rate;
@@ -302,7 +302,7 @@ def riss_step(st, k, t, dthz, fx, fy, aod, vw, vbar, vod, par, gravity_model, az
         cor_x = 0.0
         cor_y = 0.0
         wil_cent = 0.0
-    # pitch (eq. 1) and roll (eq. 2) of the interval
+    # pitch (item 1 of the module docstring) and roll (item 2) of the interval
     a = aod[k] * s
     u = (fy[k] - par[PAR_ACCEL_BIAS_Y] - a - cor_y) / g
     u = min(1.0, max(-1.0, u))
@@ -314,7 +314,7 @@ def riss_step(st, k, t, dthz, fx, fy, aod, vw, vbar, vod, par, gravity_model, az
     w = min(1.0, max(-1.0, w))
     r = np.arcsin(w)
     cr = np.cos(r)
-    # azimuth (eq. 3 and variants)
+    # azimuth (item 3 and its variants)
     wz = (dthz[k] / dt - bgz) * sg
     pdot = (p - p0) / dt if k > 1 else 0.0
     wil_up = wie_u + wel_u
@@ -329,7 +329,7 @@ def riss_step(st, k, t, dthz, fx, fy, aod, vw, vbar, vod, par, gravity_model, az
         A += TWO_PI
     elif A >= TWO_PI:
         A -= TWO_PI
-    # velocity (eq. 4) at t[k] and position (eq. 5)
+    # velocity (item 4) at t[k] and position (item 5)
     vk = vod[k] * s
     vel_old = cols[3]
     vel_old[0], vel_old[1], vel_old[2] = ve, vn, vu
@@ -418,7 +418,7 @@ def mechanize_riss(
         Azimuth equation (module docstring, item 3).
     coriolis : bool
         Compensate the Coriolis/transport term in pitch and roll and the Earth/transport rate
-        seen by the body z axis in the centripetal term (False: the seed's eqs. 1-2). The
+        seen by the body z axis in the centripetal term (False: the textbook pitch and roll, items 1-2). The
         azimuth always removes the Earth and transport rates.
     window : float
         Centred averaging window [s] for specific force, odometer acceleration and centripetal

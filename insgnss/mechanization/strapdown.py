@@ -1,19 +1,19 @@
 """Local-level-frame (ENU) strapdown mechanization.
 
 One step from epoch k-1 to k, given the angular and velocity increments ``dtheta``, ``dv`` of
-the interval (body frame, right-forward-up), follows seed 000 sections 2.4-2.6 (Noureldin et al.
+the interval (body frame, right-forward-up), follows the textbook LLF chain (Noureldin et al.
 2013, section 5.5) with every term taken at the middle of the interval, which makes the step
 second order (Savage 2000, *Strapdown Analytics*, sections 7.1-7.3):
 
 1. Earth terms (:func:`llf_earth_terms`): the mid-interval position is predicted from the start
    state (:func:`llf_mid_point`), ``lat_m = lat + v_n dt / (2 (M + h))``, ``h_m = h + v_u dt / 2``
-   (an O(dt^2) estimate, enough for O(dt^3) local error). There the Earth rate ``w_ie^l``
-   (eq. 22), the transport-rate matrix ``K`` with ``w_el^l = K v`` (eq. 23), the radii and
+   (an O(dt^2) estimate, enough for O(dt^3) local error). There the Earth rate ``w_ie^l``,
+   the transport-rate matrix ``K`` with ``w_el^l = K v``, the radii and
    normal gravity are evaluated. The
    prediction uses only the start of the interval, so the step keeps no memory: the filter's
    feedback and partial intervals need nothing special, and the inverse stays explicit.
 
-2. Velocity (:func:`velocity_update`, eq. 24) with the specific-force increment rotated by the
+2. Velocity (:func:`velocity_update`) with the specific-force increment rotated by the
    mid-interval attitude ``C_mid = exp(-[zeta0/2 x]) C_{k-1} exp([dtheta/2 x])`` (rotation
    compensation, ``zeta0 = (w_ie + K v_{k-1}) dt``) and the Coriolis and transport terms at the
    mid velocity::
@@ -23,27 +23,27 @@ second order (Savage 2000, *Strapdown Analytics*, sections 7.1-7.3):
    where ``B(a, b) = ((K a) x b + (K b) x a) / 2`` is the bilinear form of ``(K v) x v``: equal to
    it at the mid velocity to O(dt^2) and linear in ``v_k``, so the step is solved in closed form.
    For rate inputs the increments are the trapezoidal integrals of the samples, so this is the
-   seed's trapezoidal velocity integration (eq. 25).
+   textbook trapezoidal velocity integration.
 
 3. Attitude (:func:`attitude_step`): the body rotates by ``dtheta`` relative to inertial space and
    the l-frame by ``zeta = (w_ie + K (v_{k-1} + v_k) / 2) dt``::
 
        C_k = exp(-[zeta x]) C_{k-1} exp([dtheta x])
 
-   (Savage 1998; Groves eq. 5.46). The seed's eq. 16 instead subtracts ``C_l^b w_il dt`` from
+   (Savage 1998; Groves eq. 5.46). The textbook form instead subtracts ``C_l^b w_il dt`` from
    ``dtheta`` with the attitude and velocity at the *start* of the interval, which is first
-   order. ``dtheta`` is applied exactly (rotation vector) or, selectable, by the seed's
-   first-order quaternion update ``q_k = q_{k-1} + 1/2 U q_{k-1}`` followed by normalisation
-   (eq. 18), which is exactly a rotation about ``dtheta`` by the angle ``2 atan(|dtheta| / 2)``.
+   order. ``dtheta`` is applied exactly (rotation vector) or, selectable, by the
+   first-order quaternion update ``q_k = q_{k-1} + 1/2 U q_{k-1}`` followed by normalisation,
+   which is exactly a rotation about ``dtheta`` by the angle ``2 atan(|dtheta| / 2)``.
 
-4. Position by the trapezoidal rule on velocity (eqs. 26-28) with the radii and ``cos(lat)`` at
+4. Position by the trapezoidal rule on velocity with the radii and ``cos(lat)`` at
    the predicted mid point (:func:`position_update`).
 
 On a 20-minute aircraft flight with 15-35 deg banked turns the end-position error against an
 analytic reference is 6 mm at 100 Hz with coning and falls by 4 per halving of the step
 (``bench/bench_integration_order.py``); with the start-of-interval terms it was 0.17 m, halving
 per halving. Every stage is invertible in closed form, which is what makes :mod:`.inverse` an
-exact dual. The same compiled step serves the batch :func:`mechanize`, the seed-compatible
+exact dual. The same compiled step serves the batch :func:`mechanize`, the streaming
 :class:`INSMechanization` and the Kalman filter's nominal-state propagation; the
 wander-azimuth frame (:mod:`.wander`) reuses stages 2 and 3.
 """
@@ -107,7 +107,7 @@ def llf_mid_point(lat, h, v, dt):
 
 @njit(cache=True, inline="always")
 def position_step(lat, lon, h, v_old, v_new, dt, c_m, Rm, Rn):
-    """Trapezoidal position update (seed eqs. 26-28) with the radii ``Rm = M + h``,
+    """Trapezoidal position update with the radii ``Rm = M + h``,
     ``Rn = N + h`` and ``cos(lat)`` (``c_m``) taken at the mid-interval point."""
     lat_new = lat + 0.5 * (v_old[1] + v_new[1]) / Rm * dt
     lon_new = lon + 0.5 * (v_old[0] + v_new[0]) / (Rn * c_m) * dt
@@ -117,7 +117,7 @@ def position_step(lat, lon, h, v_old, v_new, dt, c_m, Rm, Rn):
 
 @njit(cache=True)
 def position_update(lat, lon, h, v_old, v_new, dt):
-    """The strapdown step's position rule: trapezoidal velocity (seed eqs. 26-28) with the radii
+    """The strapdown step's position rule: trapezoidal velocity with the radii
     at the mid-interval point predicted by :func:`llf_mid_point`. Second order; its inverse
     (velocity from positions) is :func:`insgnss.trajectory_tools.llh_to_vne`."""
     _, c, h_m, M, N = llf_mid_point(lat, h, v_old, dt)
@@ -128,8 +128,8 @@ def position_update(lat, lon, h, v_old, v_new, dt):
 def llf_earth_terms(lat, h, vel, dt, gravity_model, wie, K):
     """Earth quantities of one interval at its predicted middle (:func:`llf_mid_point`).
 
-    Writes the Earth rate ``w_ie^l`` (eq. 22) into ``wie`` and the transport-rate matrix ``K``
-    with ``w_el^l = K v`` (eq. 23: rows ``(0, -1/(M+h), 0)``, ``(1/(N+h), 0, 0)``,
+    Writes the Earth rate ``w_ie^l = Omega (0, cos lat, sin lat)`` into ``wie`` and the
+    transport-rate matrix ``K`` with ``w_el^l = K v`` (rows ``(0, -1/(M+h), 0)``, ``(1/(N+h), 0, 0)``,
     ``(tan(lat)/(N+h), 0, 0)``) into ``K``. Returns ``(g, cos lat_m, M_m + h_m, N_m + h_m)`` with
     the normal gravity ``g`` at the mid point.
     """
@@ -208,7 +208,7 @@ def mechanize(
     gravity_model : str
         Normal gravity model, one of :data:`insgnss.earth.GRAVITY_MODELS`.
     attitude_update : {"exact", "first_order"}
-        Exact rotation-vector update, or the seed's first-order quaternion update (eq. 18).
+        Exact rotation-vector update, or the normalised first-order quaternion update.
     coning : bool
         Apply two-sample coning/sculling corrections to the increments.
     fix_height : bool
@@ -249,23 +249,23 @@ def mechanize(
     return df
 
 
-# --- seed-compatible streaming interface ------------------------------------------------------------
+# --- streaming interface of the teaching codes ------------------------------------------------------------
 class INSMechanization:
-    """Streaming LLF mechanization with the API of seed report 000 (section 2).
+    """Streaming LLF mechanization with the API of the classic teaching implementations.
 
     Feed one IMU sample at a time with :meth:`process_measurement`; the first
     ``alignment_time`` seconds are averaged for a static coarse alignment (levelling and
     gyrocompassing, :mod:`insgnss.align`), after which every sample advances the navigation
     state with the same compiled :func:`strapdown_step` as :func:`mechanize` (or
     :func:`~insgnss.mechanization.wander.wander_step` with ``frame="wander"``). Rates are turned
-    into interval increments by the trapezoidal rule with the previous sample (seed eq. 25).
+    into interval increments by the trapezoidal rule with the previous sample.
 
-    The seed's stages are available one by one for teaching and tests, as thin wrappers of the
+    The chain's stages are available one by one for teaching and tests, as thin wrappers of the
     compiled stages of :func:`strapdown_step` (ENU frame): :meth:`v_and_r_integration`,
     :meth:`angular_velocity_compensation`, :meth:`attitude_integration`, called in that order
     for one interval reproduce the step to rounding. Our step integrates velocity before
-    attitude (the reverse of the seed's 2.7 order) because the l-frame's rotation over the
-    interval depends on the velocity at its middle; with the start values, as in the seed, the
+    attitude (the reverse of the textbook order) because the l-frame's rotation over the
+    interval depends on the velocity at its middle; with the start values, as in the textbook form, the
     step is first order.
 
     Parameters
@@ -284,10 +284,10 @@ class INSMechanization:
     alignment_time : float
         Duration of the static alignment [s].
     gravity_model : str
-        One of :data:`insgnss.earth.GRAVITY_MODELS`; the seed uses the GRS80 series (eq. 12),
+        One of :data:`insgnss.earth.GRAVITY_MODELS`; the textbook form is the GRS80 series,
         the default here.
     attitude_update : {"exact", "first_order"}
-        Exact rotation-vector update, or the seed's first-order quaternion update (eq. 18).
+        Exact rotation-vector update, or the normalised first-order quaternion update.
     frame : {"enu", "wander"}
         Navigation frame; ``"wander"`` is regular over the poles. :meth:`get_params` reports
         ENU quantities in both cases, plus ``wander_angle`` for the wander frame.
@@ -327,7 +327,8 @@ class INSMechanization:
 
     # --- processing ---
     def compensate_errors_and_compute_params(self, measurement) -> np.ndarray:
-        """Compensated ``[t, w(3), f(3)]`` by seed eqs. 10-11."""
+        """Compensated ``[t, w(3), f(3)]``: ``(I + S + N)^-1 (raw - b)`` (scale factors S,
+        non-orthogonality N, bias b; :func:`insgnss.imu.compensate`)."""
         m = np.asarray(measurement, float)
         if m.shape != (7,):
             raise ValueError(f"measurement must have 7 elements (t, wx, wy, wz, fx, fy, fz); "
@@ -374,7 +375,7 @@ class INSMechanization:
 
     def align(self, measurement) -> None:
         """Accumulate a compensated sample for the static alignment; finish when the
-        alignment time has elapsed (seed section 2.2)."""
+        alignment time has elapsed."""
         if self.alignment_complete:
             raise RuntimeError("alignment is already complete")
         m = np.asarray(measurement, float)
@@ -408,14 +409,14 @@ class INSMechanization:
             out["wander_angle"] = self.wander_angle * k
         return out
 
-    # --- the seed's stages (sections 2.4-2.6) as wrappers of the compiled step ---
+    # --- the chain's stages as wrappers of the compiled step ---
     def _require_enu(self, name: str) -> None:
         if self._wander is not None or self.frame != "enu":
-            raise ConfigError(f"{name} is a stage of the ENU (local-level) step of seed 000",
+            raise ConfigError(f"{name} is a stage of the ENU (local-level) step",
                               column="frame", expected="enu", found=self.frame)
 
     def v_and_r_integration(self, dtheta, dv, dt: float) -> tuple[np.ndarray, np.ndarray]:
-        """Velocity and position over one interval (seed section 2.6, eqs. 24-28).
+        """Velocity and position over one interval (Noureldin et al. 2013, section 5.5).
 
         Evaluates the Earth terms at the interval's predicted middle
         (:func:`llf_earth_terms`), integrates the velocity with gravity, Coriolis and the
@@ -441,14 +442,13 @@ class INSMechanization:
         return self.vel.copy(), self.pos.copy()
 
     def angular_velocity_compensation(self, dtheta, dt: float) -> np.ndarray:
-        """Body rotation relative to the l-frame over the interval, ``theta_lb^b`` (seed section
-        2.4, eqs. 15-16).
+        """Body rotation relative to the l-frame over the interval, ``theta_lb^b``.
 
         ``theta_lb^b = log(C^T exp(-[zeta x]) C exp([dtheta x]))`` with the l-frame rotation
         ``zeta = (w_ie^l + w_el^l) dt`` at mid-interval (:func:`~insgnss.mechanization.core.
         nav_frame_rotation`), taken from the preceding :meth:`v_and_r_integration` of the same
-        interval; without one, at the current state (the seed's start-of-interval eq. 15). The
-        seed's ``dtheta - C_l^b w_il dt`` is the first-order form of the same quantity.
+        interval; without one, at the current state (the textbook's start-of-interval rates). The
+        textbook ``dtheta - C_l^b w_il dt`` is the first-order form of the same quantity.
         """
         self._require_enu("angular_velocity_compensation")
         th = np.empty(3)
@@ -466,26 +466,26 @@ class INSMechanization:
                                       @ attitude.rotvec_to_dcm(th))
 
     def attitude_integration(self, theta_lb) -> tuple[float, float, float]:
-        """``C_b^l <- C_b^l exp([theta_lb x])`` (seed section 2.5; the exact form of the
-        quaternion update eqs. 17-18, which :meth:`angular_velocity_compensation` already
+        """``C_b^l <- C_b^l exp([theta_lb x])`` (the exact form of the
+        first-order quaternion update, which :meth:`angular_velocity_compensation` already
         applied to ``dtheta`` when ``attitude_update="first_order"``). Returns the new
-        ``(roll, pitch, azimuth)`` [rad] (eqs. 19-21)."""
+        ``(roll, pitch, azimuth)`` [rad]."""
         self._require_enu("attitude_integration")
         self.C = self.C @ attitude.rotvec_to_dcm(np.asarray(theta_lb, float))
         self._interval = None
         r, p, a = dcm_to_euler(self.C)
         return float(r), float(p), float(a)
 
-    # --- accessory methods of seed section 2.8 ---
+    # --- accessory methods of the teaching codes ---
     @staticmethod
     def gravity(lat: float, h: float) -> float:
-        """Normal gravity [m/s^2] by the GRS80 series (seed eq. 12); ``lat`` in radians."""
+        """Normal gravity [m/s^2] by the GRS80 series; ``lat`` in radians."""
         check_latitude(lat, "lat")
         return earth.normal_gravity(lat, h, "grs80_series")
 
     @classmethod
     def radii_of_curvature(cls, lat: float) -> tuple[float, float]:
-        """``(N, M)``: prime-vertical and meridian radii [m] (seed eqs. 13-14, seed order)."""
+        """``(N, M)``: prime-vertical and meridian radii [m] (in this order)."""
         check_latitude(lat, "lat")
         M, N = radii(float(lat))
         return float(N), float(M)
@@ -496,17 +496,17 @@ class INSMechanization:
 
     @classmethod
     def get_rotation_matrix(cls, r: float, p: float, A: float) -> np.ndarray:
-        """``R_b^l = Rz(-A) Rx(p) Ry(r)`` (seed eq. 6)."""
+        """``R_b^l = Rz(-A) Rx(p) Ry(r)``."""
         return euler_to_dcm(r, p, A)
 
     @staticmethod
     def matrix_to_normalized_quaternion(R) -> np.ndarray:
-        """Unit quaternion ``(q1, q2, q3, q4)``, scalar last (seed eqs. 7-8)."""
+        """Unit quaternion ``(q1, q2, q3, q4)``, scalar last."""
         return attitude.dcm_to_quat(R)
 
     @staticmethod
     def quaternion_to_matrix(q) -> np.ndarray:
-        """DCM from a quaternion, scalar last (seed eq. 9)."""
+        """DCM from a quaternion, scalar last."""
         return attitude.quat_to_dcm(q)
 
     @staticmethod

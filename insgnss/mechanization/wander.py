@@ -3,14 +3,14 @@
 Frame
 -----
 The wander frame w has its z axis up along the ellipsoid normal, like the ENU frame l, and its
-horizontal axes turned about that normal by the wander angle ``alpha`` (seed 004 eq. 14)::
+horizontal axes turned about that normal by the wander angle ``alpha``::
 
     C_w^l = Rz(alpha) = [[cos a, -sin a, 0], [sin a, cos a, 0], [0, 0, 1]]
 
 so ``v^l = Rz(alpha) v^w`` and the true heading is ``A = A_w - alpha`` (``A_w``: heading from the
 wander y axis, clockwise). The frame does not turn about its own vertical relative to the Earth,
-``w_ew^w . z = 0``, which fixes ``d alpha / dt = -d lon / dt sin(lat)`` (seed 004 eqs. 11-15;
-Jekeli 2001 section 4.3.3; Groves 2013 section 5.3.5; Savage 2000 section 4.4.1.2). ``tan(lat)``
+``w_ew^w . z = 0``, which fixes ``d alpha / dt = -d lon / dt sin(lat)``
+(Jekeli 2001 section 4.3.3; Groves 2013 section 5.3.5; Savage 2000 section 4.4.1.2). ``tan(lat)``
 (the ENU transport rate's vertical component) and ``1/cos(lat)`` (the longitude rate) never
 appear, so nothing is singular at the poles.
 
@@ -19,8 +19,8 @@ the height. Its third row is the Earth's polar axis in w, ``z^w = (cos lat sin a
 sin lat)``, its third column the local up in ECEF; latitude, longitude and ``alpha`` are read from
 it only for output.
 
-Equations (seed 004 eq. 16 written with the regular curvature form)
--------------------------------------------------------------------
+Equations (the wander-frame mechanization in the regular curvature form)
+-----------------------------------------------------------------------
 - Earth rate ``w_ie^w = Omega z^w``; gravity ``g^w = (0, 0, -g(lat, h))``;
 - transport rate ``rho^w = K v^w`` with ``rho_z = 0`` and the horizontal part
   ``rho_h = F (u x v)_h``, ``(u x v)_h = (-v_y, v_x)``, where the curvature matrix is the ENU
