@@ -22,7 +22,7 @@ forward solution's raw path length beside its stance-to-stance distance
 (:mod:`insgnss.simulate.gait`) with one effect at a time (intra-interval motion at 200/100/60
 Hz with and without the coning/sculling correction, ZUPT window timing, stance roll, clipping,
 scale factors, non-orthogonality, g-sensitivity, gravity, noise).
-``--only sensor``: the second round of issue 21 (docs/zupt.md section 6): anti-aliasing
+``--only sensor``: the second round of sensor effects (docs/zupt.md section 6): anti-aliasing
 filters, accelerometer size effect, rate-dependent gyro scale and accelerometer nonlinearity,
 each applied on the simulated walk's 4 kHz grid, then compensated over a range of sizes on the
 real tracks (end height and the RMS ZUPT innovation at stance entry).

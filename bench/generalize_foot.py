@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""Foot rows of the cross-dataset protocol (issue 13 item 5): one configuration, data it was
+"""Foot rows of the cross-dataset generalization protocol: one configuration, data it was
 never tuned on.
 
 Protocol
