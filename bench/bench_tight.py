@@ -1,4 +1,4 @@
-"""Loosely vs tightly coupled INS/GNSS on the rtklibexplorer walk (issue 19, docs/tight.md).
+"""Loosely vs tightly coupled INS/GNSS on the rtklibexplorer walk (docs/tight.md).
 
 Runs the job ``scenarios/walk_0827_tight.toml`` (raw u-blox stream, consumer IMU, ZUPT, the
 data author's two 15 s outage windows) in these variants and scores each forward solution with
