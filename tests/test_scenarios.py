@@ -31,6 +31,10 @@ DURATION = 120.0
 SETTINGS_FOR = {"foot_mounted.toml": "foot_walk.toml"}
 #: horizontal RMS bound [m] of a working run (consumer MEMS in town with 2.5 m GNSS included)
 MAX_RMS_H = 5.0
+#: the same for a job aided by the receiver's own pseudoranges (single-point positioning with
+#: broadcast orbits and clocks and the Klobuchar ionosphere: metres of common bias against an
+#: RTK reference, 8-9 m on the rtklibexplorer walk, docs/tight.md)
+MAX_RMS_H_SPP = 15.0
 
 
 def _data(path: Path) -> dict:
@@ -67,7 +71,8 @@ def test_bundled_scenario_runs(path: Path):
     ev = s["evaluation"]
     assert ev, "every bundled scenario is evaluated against a truth or reference"
     sol = ev.get("smoothed") or ev["forward"]
-    assert np.isfinite(sol["rms_h_m"]) and sol["rms_h_m"] < MAX_RMS_H, sol
+    spp = job["aiding"]["gnss"] == "tight" or job["inputs"]["gnss_raw"]["path"] is not None
+    assert np.isfinite(sol["rms_h_m"]) and sol["rms_h_m"] < (MAX_RMS_H_SPP if spp else MAX_RMS_H), sol
     if job.simulation:
         t = res.filter.forward.index.to_numpy(float)
         assert t[-1] - t[0] > 0.5 * DURATION
