@@ -1,4 +1,4 @@
-"""Cross-dataset protocol (issue 13, docs/generalization.md): one configuration per platform,
+"""Cross-dataset protocol (docs/generalization.md): one configuration per platform,
 every method decision made on one group of recordings and reported on another.
 
 Groups
