@@ -1,4 +1,4 @@
-"""The wander-azimuth filter over the pole (issue 17): accuracy, consistency, speed.
+"""The wander-azimuth filter over the pole: accuracy, consistency, speed.
 
     python bench/bench_wander_filter.py            # one polar run, wander and ENU filters
     python bench/bench_wander_filter.py --mc 20    # + 20-seed position NEES of the wander filter
