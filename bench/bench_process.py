@@ -63,13 +63,11 @@ time_base = "run"
 [inputs.imu]
 format = "native"
 path = "imu.csv"
-rate_hz = 200.0
 
 [inputs.gnss]
 format = "native"
 path = "gnss.csv"
 lever_arm = [0.0, 1.2, 1.5]   # the scenario's antenna lever arm
-use_velocity = true
 
 [inputs.reference]
 format = "native"

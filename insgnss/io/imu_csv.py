@@ -64,9 +64,8 @@ from ..validate import (
     find_gaps,
     finish_attrs,
     parse_numeric,
-    read_text,
+    read_rows,
     require_rows,
-    split_lines,
 )
 
 #: gyro units: name -> (scale to rad or rad/s, is_increment)
@@ -442,7 +441,7 @@ def read_imu_csv(
     M = mounting_matrix(axis_map, mounting_euler_deg, sensor_axes=sensor_axes,
                         euler_convention=euler_convention)
     comment = (comment,) if isinstance(comment, str) else tuple(comment)
-    rows = split_lines(read_text(path), path, comment=comment, header=header)
+    rows = read_rows(path, comment=comment, header=header, delimiter=delimiter)
     head = levels = None
     if header:
         extra = int(header_rows) - 1
@@ -450,7 +449,8 @@ def read_imu_csv(
             raise InputFormatError("no data rows after the header", file=path,
                                    row=rows.header_line, expected=f"{header_rows} header "
                                    "lines and data rows", found=f"{len(rows.lines) + 1} lines")
-        head, levels = header_names([rows.header, *rows.lines[:extra]], delimiter)
+        head, levels = header_names([rows.header, *(rows.lines[:extra] if extra else ())],
+                                    delimiter)
         if extra:
             rows = TextRows(rows.file, rows.lines[extra:], rows.line_no[extra:], rows.header,
                             rows.header_line, rows.comments)

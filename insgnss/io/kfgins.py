@@ -38,8 +38,7 @@ from ..validate import (
     ensure_not_input,
     finish_attrs,
     parse_numeric,
-    read_text,
-    split_lines,
+    read_rows,
 )
 from .gpstime import WEEK_SECONDS, week_sow_from_gps_seconds
 from .imu_csv import imu_table_from_arrays, mounting_matrix
@@ -52,7 +51,7 @@ NAV_COLUMNS = ("week", "sow", "lat", "lon", "h", "vn", "ve", "vd", "roll", "pitc
 
 
 def _rows(path):
-    rows = split_lines(read_text(path), path, comment=("#", "%"))
+    rows = read_rows(path, comment=("#", "%"), delimiter=",")
     delimiter = "," if "," in rows.lines[0] else None
     return rows, delimiter
 

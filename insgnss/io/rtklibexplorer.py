@@ -42,9 +42,8 @@ from ..validate import (
     check_finite,
     check_time_order,
     parse_numeric,
-    read_text,
+    read_rows,
     require_rows,
-    split_lines,
 )
 from .gpstime import from_gps_seconds
 from .imu_csv import imu_table_from_arrays, mounting_matrix
@@ -115,11 +114,7 @@ def read_rtklibexplorer_imu(
                           found=repr(time_offset))
     M = rtklibexplorer_mounting(mounting_rpy_deg)
     path = Path(path)
-    rows = split_lines(read_text(path), path, comment=())
-    if skip_first_last:
-        require_rows(len(rows.lines), 3, path, row=int(rows.line_no[-1]), what="lines")
-        rows.lines = rows.lines[1:-1]
-        rows.line_no = rows.line_no[1:-1]
+    rows = read_rows(path, comment=(), delimiter=",", trim=skip_first_last)
     values = parse_numeric(rows, RAW_COLUMNS, delimiter=",")
     line_no = rows.line_no
     check_finite(values, RAW_COLUMNS, line_no, path)

@@ -45,8 +45,7 @@ from ..validate import (
     ensure_not_input,
     finish_attrs,
     parse_numeric,
-    read_text,
-    split_lines,
+    read_rows,
 )
 from .gpstime import to_gps_seconds
 from .native import atomic_write, csv_writer, from_file_columns, to_file_columns
@@ -99,7 +98,7 @@ def read_trajectory_csv(path: str | os.PathLike, *, required: Sequence[str] = ("
     Empty cells and ``nan`` are NaN; NaN/inf are errors in ``time`` and the ``required``
     columns only. Time must increase strictly.
     """
-    rows = split_lines(read_text(path), path, comment=("#",), header=True)
+    rows = read_rows(path, comment=("#",), header=True, delimiter=",")
     head = [h.strip() for h in rows.header.split(",")]
     if not head or head[0] != "time":
         raise InputFormatError("first column must be 'time'", file=path, row=rows.header_line,
@@ -115,9 +114,7 @@ def read_trajectory_csv(path: str | os.PathLike, *, required: Sequence[str] = ("
             raise InputFormatError("missing column", file=path, row=rows.header_line, column=want,
                                    expected=f"a column {want!r} (or {want + '_deg'!r})",
                                    found=", ".join(head))
-    rows.lines = [",".join(f if f.strip() else "nan" for f in s.split(","))
-                  if (",," in s or s.endswith(",") or s.startswith(",")) else s for s in rows.lines]
-    v = parse_numeric(rows, head, delimiter=",")
+    v = parse_numeric(rows, head, delimiter=",", empty_nan=True)
     idx = [0] + [head.index(c) for c in file_names]
     check_finite(v[:, idx], [head[i] for i in idx], rows.line_no, path)
     for c, lim in (("lat_deg", 90.0), ("lon_deg", 360.0)):
