@@ -667,9 +667,17 @@ _DASH = {"solid": "-", "dashed": "--", "dotted": ":", "dashdot": "-."}
 def _draw(ax, p: Panel, fig):
     from matplotlib.collections import LineCollection
 
-    for a, b in p.shade:
-        ax.axvspan(a, b, color=OUTAGE_COLOR, alpha=0.12, lw=0,
-                   label=None)
+    if p.shade:  # every outage window in one collection (one axvspan each costs 20 ms)
+        from matplotlib.collections import PolyCollection
+
+        ab = np.asarray(p.shade, float).reshape(-1, 2)
+        verts = np.stack([np.column_stack([ab[:, 0], np.zeros(len(ab))]),
+                          np.column_stack([ab[:, 0], np.ones(len(ab))]),
+                          np.column_stack([ab[:, 1], np.ones(len(ab))]),
+                          np.column_stack([ab[:, 1], np.zeros(len(ab))])], axis=1)
+        ax.add_collection(PolyCollection(verts, transform=ax.get_xaxis_transform(),
+                                         facecolors=OUTAGE_COLOR, alpha=0.12, linewidths=0,
+                                         zorder=0.5), autolim=False)
     for tr in p.traces:
         ls = _DASH[tr.dash]
         if tr.kind == "line":

@@ -28,6 +28,18 @@ two-sided 95 % interval of one chi-square(dof) sample, and of the moving mean ov
 samples, ``chi2.ppf((1 -+ 0.95) / 2, window dof) / window``
 (:func:`insgnss.consistency.chi2_bounds`).
 
+Rate
+----
+The report shows the run at the rate of its trajectory files (``[outputs] rate_hz``, default
+``"auto"``: 10 Hz, and the samples around every GNSS and control-point epoch,
+:func:`output_table`): the solution tables, and the reference epochs against which the
+errors, NEES, excursions and drift are formed, are thinned the same way
+(:func:`insgnss.io.native.decimation_rows`); the solution is still sampled at those epochs
+from its full-rate table. ``rate_hz = "imu"`` gives every sample and every reference epoch.
+A figure shows at most a few thousand points per series anyway (:func:`insgnss.plots.decimate`),
+and a 1 h log at 200 Hz with a 200 Hz reference is then drawn from 36,000 instead of 720,000
+epochs.
+
 Drift inside outages
 --------------------
 Per outage and solution: the horizontal error at the reference epochs inside it, the filter's
@@ -359,6 +371,21 @@ def innovation_groups(inn: pd.DataFrame, mtype: str) -> list[tuple]:
     return out
 
 
+def output_table(result, df: pd.DataFrame) -> pd.DataFrame:
+    """``df`` (a solution or the reference of ``result``) at the run's trajectory output rate
+    (``[outputs] rate_hz``), keeping the samples around the GNSS and control-point epochs, as
+    the trajectory files are written (:func:`insgnss.io.native.decimate_table`)."""
+    from .io.native import decimate_table
+
+    job = getattr(result, "job", None)
+    if job is None:
+        return df
+    inputs = result.inputs
+    epochs = [x.index for x in (getattr(inputs, "gnss", None),
+                                getattr(inputs, "control_points", None)) if x is not None]
+    return decimate_table(df, job["outputs"]["rate_hz"], epochs, job["process"]["preset"])
+
+
 def build_report_data(result) -> ReportData:
     """Assemble :class:`ReportData` from a :class:`~insgnss.pipeline.JobResult`."""
     f = result.filter
@@ -374,6 +401,8 @@ def build_report_data(result) -> ReportData:
         kinds = tuple(k for k in kinds if k != "velocity")
         notes.append("The reference measures the antenna and the lever arm is not zero: "
                      "velocity errors are not formed (the antenna velocity needs the body rate).")
+    if ref is not None and len(ref):  # the reference epochs the report evaluates (see Rate)
+        ref = output_table(result, ref)
     if ref is not None and kinds:
         missing = [q for q in ("velocity", "attitude") if q not in _reference_kinds(ref)]
         if missing:
@@ -384,12 +413,18 @@ def build_report_data(result) -> ReportData:
         tab = getattr(f, name, None)
         if tab is None or not len(tab):
             continue
-        sd = SolutionData(name, tab)
+        sd = SolutionData(name, output_table(result, tab))
         ev = result.evaluation.get(name)
         if ev:
-            err = ev["errors"][["east", "north", "up", "horizontal"]
-                               + [c for c in ("east_std", "north_std", "up_std")
-                                  if c in ev["errors"].columns]].copy()
+            err = ev["errors"]
+            if ref is not None and len(ref) < len(err):
+                from .consistency import match_times
+
+                err = err[match_times(err.index.to_numpy(float),
+                                      ref.index.to_numpy(float)) >= 0]
+            err = err[["east", "north", "up", "horizontal"]
+                      + [c for c in ("east_std", "north_std", "up_std")
+                         if c in err.columns]].copy()
             x = np.column_stack([err[["east", "north", "up"]].to_numpy(float),
                                  np.full((len(err), 6), np.nan)])
             t_x = err.index.to_numpy(float)

@@ -89,10 +89,20 @@ def figure_json(spec: FigureSpec) -> dict:
                                 "yanchor": "bottom", "showarrow": False,
                                 "font": {"size": 10, "color": "#444"},
                                 "bgcolor": "rgba(255,255,255,0.7)"})
-        for a, b in p.shade:
-            shapes.append({"type": "rect", "xref": f"x{_ax(k)}", "yref": f"y{_ax(k)} domain",
-                           "x0": a, "x1": b, "y0": 0, "y1": 1, "fillcolor": OUTAGE_COLOR,
-                           "opacity": 0.12, "line": {"width": 0}, "layer": "below"})
+        if p.shade:  # all outage windows as one filled trace on a hidden 0-1 y axis
+            # (one shape per window makes a page of thousands of windows unusable)
+            ab = np.asarray(p.shade, float).reshape(-1, 2)
+            n_ax = len(spec.panels) + k
+            layout[f"yaxis{n_ax}"] = {"overlaying": f"y{_ax(k)}", "anchor": f"x{_ax(k)}",
+                                      "range": [0, 1],
+                                      "visible": False, "fixedrange": True}
+            xs = np.column_stack([ab[:, 0], ab[:, 0], ab[:, 1], ab[:, 1],
+                                  np.full(len(ab), np.nan)]).ravel()
+            ys = np.tile([0.0, 1.0, 1.0, 0.0, np.nan], len(ab))
+            data.append({"type": "scatter", "x": xs.tolist(), "y": ys.tolist(),
+                         "mode": "lines", "fill": "toself", "line": {"width": 0},
+                         "fillcolor": _rgba(OUTAGE_COLOR, 0.12), "hoverinfo": "skip",
+                         "showlegend": False, "xaxis": f"x{_ax(k)}", "yaxis": f"y{n_ax}"})
         for tr in p.traces:
             axes = {"xaxis": f"x{_ax(k)}", "yaxis": f"y{_ax(k)}"}
             name = tr.label

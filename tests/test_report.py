@@ -277,3 +277,77 @@ def test_single_run_nees_uses_the_epoch_covariance(demo):
         e = err.loc[t, ["vel_e", "vel_n", "vel_u"]].to_numpy(float)
         assert nees.loc[t, "velocity"] == pytest.approx(
             e @ np.linalg.solve(f.P_filtered[k][3:6, 3:6], e), rel=1e-9)
+
+
+def test_report_data_at_output_rate(demo):
+    """The report draws the run at its trajectory output rate (10 Hz by default, plus the
+    samples around every GNSS epoch), the errors at the thinned reference epochs; ``"imu"``
+    keeps every sample and every reference epoch."""
+    import copy
+
+    res = demo[0]
+    full = res.filter.forward
+    data = build_report_data(res)
+    tab = data.solutions["forward"].table
+    t = tab.index.to_numpy(float)
+    assert len(tab) < len(full) / 3  # the demo IMU runs well above 10 Hz
+    assert np.isin(t, full.index.to_numpy(float)).all()  # rows of the solution, not resampled
+    assert np.median(np.diff(t)) == pytest.approx(0.1, rel=0.2)
+    tg = res.inputs.gnss.index.to_numpy(float)
+    tg = tg[(tg >= t[0]) & (tg <= t[-1])]
+    gap = np.abs(t[np.clip(np.searchsorted(t, tg), 0, len(t) - 1)] - tg)
+    assert gap.max() < np.median(np.diff(full.index.to_numpy(float))) * 1.01
+    n_err = len(res.evaluation["forward"]["errors"])
+
+    def at_rate(rate):
+        other = copy.copy(res)
+        other.job = copy.deepcopy(res.job)
+        other.job["outputs"]["rate_hz"] = rate
+        return build_report_data(other)
+
+    # the demo reference is at 10 Hz: at 0.2 Hz its epochs are thinned too (the errors with it)
+    slow = at_rate(0.2)
+    err = slow.solutions["forward"].errors
+    assert len(err) < n_err / 2
+    assert np.isin(err.index.to_numpy(float), slow.reference.index.to_numpy(float)).all()
+    assert np.isin(err.index.to_numpy(float),
+                   res.evaluation["forward"]["errors"].index.to_numpy(float)).all()
+    every = at_rate("imu")
+    assert len(every.solutions["forward"].table) == len(full)
+    assert len(every.solutions["forward"].errors) == n_err
+
+
+def test_outage_shading_one_collection():
+    """Outage windows: one polygon per window in a single collection (matplotlib) and a single
+    filled trace on a hidden 0-1 axis of its own (plotly), spanning the panel's height."""
+    from matplotlib.collections import PolyCollection
+
+    from insgnss.plots import FigureSpec, Panel, Trace, render
+    from insgnss.report_interactive import figure_json
+
+    x = np.linspace(0.0, 100.0, 201)
+    windows = [(10.0, 20.0), (40.0, 45.0), (70.0, 90.0)]
+    panels = [Panel(traces=[Trace("line", x, np.sin(x))], shade=windows if k else [])
+              for k in range(3)]
+    spec = FigureSpec("t", "t", "", panels, rows=3)
+    fig = render(spec)
+    colls = [c for c in fig.axes[1].collections if isinstance(c, PolyCollection)]
+    assert len(colls) == 1
+    xy = [p.vertices for p in colls[0].get_paths()]
+    assert [(v[:, 0].min(), v[:, 0].max()) for v in xy] == windows
+    assert all(v[:, 1].min() == 0.0 and v[:, 1].max() == 1.0 for v in xy)  # axes fraction
+    assert fig.axes[1].get_xlim()[1] <= 105.0  # the shading does not change the limits
+    assert not any(isinstance(c, PolyCollection) for c in fig.axes[0].collections)
+
+    fj = figure_json(spec)
+    fills = [d for d in fj["data"] if d.get("fill") == "toself"]
+    assert len(fills) == 2  # one per shaded panel
+    for d, k in zip(fills, (2, 3), strict=True):
+        assert d["xaxis"] == f"x{k}"
+        hidden = fj["layout"]["yaxis" + d["yaxis"][1:]]
+        assert hidden["overlaying"] == f"y{k}" and hidden["range"] == [0, 1]
+        assert not hidden["visible"]
+        assert d["yaxis"] not in ("y", "y2", "y3")  # no panel's own axis
+        xs = np.array(d["x"], float)
+        assert np.nanmin(xs) == 10.0 and np.nanmax(xs) == 90.0
+        assert np.isnan(xs).sum() == len(windows)
