@@ -324,7 +324,7 @@ def _clean_rows(path: Path, comment, header, delimiter, trim) -> TextRows | None
                                        for c in tab.columns])
         if blank.any():
             return None
-    values = np.empty((n, n_fields))
+    values = np.empty((n_fields, n)).T  # column-major: each column one contiguous copy
     for j, col in enumerate(tab.columns):
         values[:, j] = (col.fill_null(np.nan) if nulls[j] else col).to_numpy()
     if b"(" in data and np.isnan(values).any():

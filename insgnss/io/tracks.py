@@ -121,7 +121,9 @@ def read_trajectory_csv(path: str | os.PathLike, *, required: Sequence[str] = ("
         if c in head:
             check_range(v[:, head.index(c)], -lim, lim, c, rows.line_no, path, unit="deg")
     keep, dropped = check_time_order(v[:, 0], rows.line_no, path, duplicates=duplicates)
-    df = pd.DataFrame(v[keep, 1:], index=pd.Index(v[keep, 0], name="time"), columns=head[1:])
+    if not keep.all():
+        v = v[keep]
+    df = pd.DataFrame(v[:, 1:], index=pd.Index(v[:, 0], name="time"), columns=head[1:])
     df = from_file_columns(df)
     return finish_attrs(df, file=path, fmt="native", time_base="unspecified",
                         line_no=rows.line_no[keep], dropped_duplicates=dropped)
