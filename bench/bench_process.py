@@ -1,7 +1,9 @@
 """Benchmark: the whole ``insgnss process`` run as a user runs it.
 
 Each run is a child process ``insgnss process JOB -o OUT --no-progress`` of this checkout
-(``PYTHONPATH`` set to it). Measured per run: wall time, peak resident memory of the child
+(``PYTHONPATH`` set to it). Measured per run: wall time, CPU time (user + system of the child
+and the figure workers it reaped: on a loaded shared machine it moves much less than the wall
+time), peak resident memory of the child
 (``ru_maxrss`` from ``os.wait4``, the child's own ``getrusage``), throughput (IMU samples/s and
 times real time) and the size of what it wrote. Modes:
 
@@ -148,6 +150,7 @@ class Run:
     wall: float
     rss_mib: float
     code: int
+    cpu: float = 0.0  #: user + system CPU seconds of the child and the workers it reaped
     summary: dict = field(default_factory=dict)
     written_mb: float = 0.0
     stderr: str = ""
@@ -163,8 +166,10 @@ def child_env(cache_dir: str | None = None) -> dict:
 
 
 def run_child(argv: list[str], env: dict, cwd: str | os.PathLike
-              ) -> tuple[float, float, int, str]:
-    """Run ``python argv`` in ``cwd`` and return (wall s, peak RSS MiB, exit code, stderr tail).
+              ) -> tuple[float, float, int, str, float]:
+    """Run ``python argv`` in ``cwd`` and return (wall s, peak RSS MiB, exit code, stderr tail,
+    CPU s). The CPU time (user + system, the child's and its reaped workers') depends much less
+    on the load of a shared machine than the wall time.
 
     ``cwd`` must not hold an ``insgnss`` folder: ``python -c`` puts the current folder first on
     ``sys.path``, so a checkout there would be imported instead of ``CODE``.
@@ -178,7 +183,8 @@ def run_child(argv: list[str], env: dict, cwd: str | os.PathLike
         proc.returncode = os.waitstatus_to_exitcode(status)
         err.seek(0)
         tail = err.read()[-2000:]
-    return wall, usage.ru_maxrss / 1024.0, proc.returncode, tail  # ru_maxrss: KiB on Linux
+    cpu = usage.ru_utime + usage.ru_stime
+    return wall, usage.ru_maxrss / 1024.0, proc.returncode, tail, cpu  # ru_maxrss: KiB
 
 
 def process(job: Path, *, cold: bool = False, report: bool = True) -> Run:
@@ -191,13 +197,13 @@ def process(job: Path, *, cold: bool = False, report: bool = True) -> Run:
             ([] if report else ["--no-report"])
         env = child_env(None if cache is None else str(cache))
         env["BENCH_MARKS"] = str(marks)
-        wall, rss, code, err = run_child(argv, env, cwd=tmp)
+        wall, rss, code, err, cpu = run_child(argv, env, cwd=tmp)
         marks = json.loads(marks.read_text()) if marks.exists() else {}
         summary = {}
         if (out / "summary.json").exists():
             summary = json.loads((out / "summary.json").read_text())
         size = sum(p.stat().st_size for p in out.rglob("*") if p.is_file()) if out.exists() else 0
-    return Run(wall, rss, code, summary, size / 1e6, err, marks)
+    return Run(wall, rss, code, cpu, summary, size / 1e6, err, marks)
 
 
 def simulated_job(data: Path, hours: float) -> Path:
@@ -232,6 +238,7 @@ def describe(name: str, mode: str, runs: list[Run]) -> dict:
     duration = sum(b - a for a, b in segments)  # seconds of data processed
     row = {"name": name, "mode": mode, "wall": statistics.median(walls), "min": min(walls),
            "max": max(walls), "rss": max(r.rss_mib for r in ok), "samples": n,
+           "cpu": statistics.median(r.cpu for r in ok),
            "duration": duration, "written": best.written_mb, "timing": s.get("timing_s", {}),
            "marks": best.marks, "runs": len(ok)}
     return row
@@ -239,14 +246,14 @@ def describe(name: str, mode: str, runs: list[Run]) -> dict:
 
 def print_table(rows: list[dict]) -> None:
     print(f"\n{'data':10s} {'mode':10s} {'runs':>4s} {'wall s':>8s} {'(min-max)':>13s} "
-          f"{'peak RSS':>9s} {'samples/s':>11s} {'x real':>7s} {'written':>9s}")
+          f"{'CPU s':>7s} {'peak RSS':>9s} {'samples/s':>11s} {'x real':>7s} {'written':>9s}")
     for r in rows:
         if not r:
             continue
         rate = r["samples"] / r["wall"] if r["wall"] else 0.0
         real = r["duration"] / r["wall"] if r["wall"] else 0.0
         print(f"{r['name']:10s} {r['mode']:10s} {r['runs']:4d} {r['wall']:8.2f} "
-              f"{r['min']:6.2f}-{r['max']:<6.2f} {r['rss']:6.0f} MiB {rate:11,.0f} "
+              f"{r['min']:6.2f}-{r['max']:<6.2f} {r['cpu']:7.2f} {r['rss']:6.0f} MiB {rate:11,.0f} "
               f"{real:7.0f} {r['written']:6.0f} MB")
 
 
