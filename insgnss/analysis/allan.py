@@ -2,15 +2,17 @@
 
 Allan deviation
 ---------------
-The overlapping Allan deviation of each axis is computed by ``allantools.oadev`` from the
+The overlapping Allan deviation of each axis is computed from the
 "phase" of the axis, i.e. the accumulated angle or velocity ``x_k = sum_{j<=k} (y_j - mean(y)) dt``::
 
     sigma^2(m tau0) = 1 / (2 (m tau0)^2 (N - 2m)) sum_n (x_{n+2m} - 2 x_{n+m} + x_n)^2
 
-(NIST SP 1065 eq. 11). allantools implements exactly this estimator, vectorised over samples for
-each tau, is maintained and widely used, so it is used as is rather than re-implemented; insgnss
-only chooses the tau grid (log-spaced averaging factors, ~``points_per_decade`` per decade, up to
-``max_fraction`` of the record) and forms the phase:
+(NIST SP 1065 eq. 11), evaluated directly: one vectorised second difference of the phase per
+averaging factor ``m`` (O(N) per tau). ``allantools.oadev`` computes the same estimator; it is not
+a runtime dependency because its current releases pull pytest, numpydoc and matplotlib into a
+user's install, and a test checks that both agree to rounding. The tau grid is log-spaced
+(averaging factors, ~``points_per_decade`` per decade, up to ``max_fraction`` of the record);
+the phase is formed as follows:
 
 - **rate tables** (``gyro_*``, ``accel_*``): each sample is taken as the sensor's average rate over
   its interval (what the sensor's own filter/decimation delivers), so the phase is the cumulative
@@ -68,7 +70,6 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-import allantools
 import numpy as np
 import pandas as pd
 
@@ -129,17 +130,24 @@ def tau_grid(n: int, rate: float, points_per_decade: int = 10, max_fraction: flo
 
 def allan_deviation_series(y: np.ndarray, rate: float, taus: np.ndarray,
                            increments_input: bool = False) -> tuple[np.ndarray, np.ndarray]:
-    """Overlapping Allan deviation of one series (allantools ``oadev``).
+    """Overlapping Allan deviation of one series (NIST SP 1065 eq. 11).
 
-    ``y`` holds rates (``increments_input=False``) or increments over ``1/rate``. Returns
+    ``y`` holds rates (``increments_input=False``) or increments over ``1/rate``. ``taus`` are
+    rounded to whole averaging factors ``m = round(tau rate)``; factors below 1 or without one
+    full second difference (``2 m > N``) are dropped, duplicates merged. Returns
     ``(taus_used, adev)`` in the unit of the rate.
     """
     y = np.asarray(y, float)
     if increments_input:
         y = y * rate
     phase = np.concatenate([[0.0], np.cumsum(y - y.mean()) / rate])
-    t_used, ad, _, _ = allantools.oadev(phase, rate=rate, data_type="phase", taus=taus)
-    return np.asarray(t_used), np.asarray(ad)
+    m_all = np.unique(np.round(np.asarray(taus, float) * rate).astype(np.int64))
+    m_all = m_all[(m_all >= 1) & (2 * m_all < phase.size)]
+    adev = np.empty(m_all.size)
+    for k, m in enumerate(m_all):  # one vectorised pass per tau (tens of taus)
+        d = phase[2 * m:] - 2.0 * phase[m:-m] + phase[:-2 * m]
+        adev[k] = np.sqrt(np.mean(d * d) / 2.0) * rate / m
+    return m_all / rate, adev
 
 
 def _runs(mask: np.ndarray) -> list[np.ndarray]:
