@@ -50,6 +50,9 @@ DISCRETIZATIONS = {"second_order": kernels.DISC_SECOND_ORDER, "vanloan": kernels
 #: compiled high-rate path: model id of this nominal representation (see :mod:`.highrate`)
 MODEL_LLF = 0
 
+#: :meth:`StrapdownModel.f_pattern` per model structure (the arrays are never written)
+_PATTERNS: dict = {}
+
 
 def output_columns(layout: StateLayout) -> list[str]:
     """Columns of the IMU-rate tables: NAV_COLS, STD_COLS, parameter values, their stds."""
@@ -299,7 +302,20 @@ class StrapdownModel(ProcessModelBase):
 
         Found by evaluating the interval step at a random, generic nominal (every term that
         can be non-zero is, with probability one) plus the parameter decays and the constant
-        blocks of coupled augmenting states."""
+        blocks of coupled augmenting states. The pattern depends only on the model's structure
+        (kept per structure: the foot profile builds a model per walk)."""
+        n = self.layout.n
+        pm = self.noise
+        key = (n, self.n_par, self.i_sg, self.i_sa, self.gmodel, self.aupd, self.dynamics,
+               (pm.decay > 0.0).tobytes(),
+               None if pm.Fx is None else (pm.Fx != 0.0).tobytes(),
+               None if pm.Qx is None else (pm.Qx != 0.0).tobytes())
+        pattern = _PATTERNS.get(key)
+        if pattern is None:
+            pattern = _PATTERNS[key] = self._f_pattern()
+        return pattern
+
+    def _f_pattern(self):
         n = self.layout.n
         rng = np.random.default_rng(12345)
         F = np.zeros((n, n))
