@@ -306,8 +306,8 @@ class StrapdownModel(ProcessModelBase):
         (kept per structure: the foot profile builds a model per walk)."""
         n = self.layout.n
         pm = self.noise
-        key = (n, self.n_par, self.i_sg, self.i_sa, self.gmodel, self.aupd, self.dynamics,
-               (pm.decay > 0.0).tobytes(),
+        key = (type(self), n, self.n_par, self.i_sg, self.i_sa, self.gmodel, self.aupd,
+               self.dynamics, (pm.decay > 0.0).tobytes(),
                None if pm.Fx is None else (pm.Fx != 0.0).tobytes(),
                None if pm.Qx is None else (pm.Qx != 0.0).tobytes())
         pattern = _PATTERNS.get(key)
