@@ -79,6 +79,36 @@ def test_tune_finds_the_maximum_likelihood_scale():
     assert res.log_likelihood["final"] >= res.log_likelihood["prior"]
 
 
+def test_converged_line_search_skips_the_vertex_run(monkeypatch):
+    """A vertex the parabola predicts to gain less than MIN_VERTEX_GAIN costs no filter run;
+    one that gains more is evaluated."""
+    from insgnss import autotune as at
+
+    p = Parameter("u", 0.0, -5.0, 5.0, step=0.5, log=False)
+
+    def sharp(th):  # maximum at 0.3, gain at the vertex 2.0 from the bracket around 0.5
+        return -50.0 * (th["u"] - 0.3) ** 2
+
+    u, f = at._line_search(p, {"u": 0.0}, sharp({"u": 0.0}), sharp, 1.0)
+    assert u == pytest.approx(0.3, abs=1e-12) and f == pytest.approx(0.0, abs=1e-12)
+
+    def calls_on_flat():
+        calls = []
+
+        def flat(th):  # predicted vertex gain 1e-6, far below MIN_VERTEX_GAIN
+            calls.append(th["u"])
+            return -1e-4 * th["u"] ** 2
+        u, _ = at._line_search(p, {"u": 0.1}, flat({"u": 0.1}), flat, 1.0)
+        return u, len(calls)
+
+    u, n = calls_on_flat()
+    assert u == pytest.approx(0.1) and n == 5  # start, two neighbours, the bracket again
+    monkeypatch.setattr(at, "MIN_VERTEX_GAIN", 0.0)
+    u0, n0 = calls_on_flat()
+    assert n0 == n + 1 and u0 != pytest.approx(0.1)  # the vertex run (a 1e-6 gain)
+    assert at.MIN_VERTEX_GAIN < OBSERVABLE_DLL
+
+
 def test_unobservable_parameter_keeps_its_prior():
     run = _scale_problem(1.0)
 

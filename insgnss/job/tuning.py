@@ -29,6 +29,7 @@ from __future__ import annotations
 
 import copy
 import logging
+import time
 from dataclasses import dataclass, replace
 
 import numpy as np
@@ -196,16 +197,23 @@ def parameters(ctx: RunContext, model: ImuErrorModel) -> list[Parameter]:
     return out
 
 
-def apply(ctx: RunContext, model: ImuErrorModel, theta: dict) -> Tuned:
-    """The job, inputs and IMU model with the parameter values ``theta`` (module docstring)."""
+def apply(ctx: RunContext, model: ImuErrorModel, theta: dict, shifted: dict | None = None
+          ) -> Tuned:
+    """The job, inputs and IMU model with the parameter values ``theta`` (module docstring).
+    ``shifted``: a cache ``{imu_time_offset: inputs}`` of the time-shifted inputs, so that the
+    runs of one offset share one IMU table."""
     job, inputs = ctx.job, ctx.inputs
     settings = copy.deepcopy(job.settings)
     a = settings["aiding"]
     changes = {}
     for name, v in theta.items():
         if name == "imu_time_offset":
-            if v:
+            if v and shifted is not None and float(v) in shifted:
+                inputs = shifted[float(v)]
+            elif v:
                 inputs = replace(inputs, imu=shift_time(inputs.imu, float(v)))
+                if shifted is not None:
+                    shifted[float(v)] = inputs
         elif name.startswith("gnss_pos_scale_q"):
             flag = name[len("gnss_pos_scale_q"):]
             key = next(k for k in a["q_scale"] if int(float(k)) == int(flag))
@@ -236,6 +244,10 @@ def autotune(ctx: RunContext, model: ImuErrorModel, run_one, build_aiding
     the tuning windows too (:func:`tuning_windows`); their likelihood is the one-step view
     (the innovation log) and the coast view (:func:`coast_rows`). Returns ``(theta, result)``:
     the values to use and the :class:`~insgnss.autotune.TuneResult`.
+
+    Work done once, not per filter run: the time-shifted inputs per offset value and the
+    production GNSS position model per set of GNSS scales and offset. The result records the
+    filter runs of each stage and the wall time (``seconds``).
     """
     params = parameters(ctx, model)
     if not params:
@@ -244,8 +256,23 @@ def autotune(ctx: RunContext, model: ImuErrorModel, run_one, build_aiding
     tuning = tuning_windows(ctx.windows, ctx.inputs.gnss) \
         if ctx.job["aiding"]["gnss_position"] else []
 
+    shifted: dict = {}  # imu_time_offset -> shifted inputs (one IMU table per offset)
+    gpositions: dict = {}  # (GNSS scales, offset) -> the production GNSS position model
+
+    def production_gpos(theta):
+        """The GNSS positions the production run would use (its windows only): those inside
+        the tuning windows are the coast view's measurements. They depend on the GNSS sigma
+        scales and (through the IMU span) the time offset only: built once per such set."""
+        k = tuple(sorted((n, v) for n, v in theta.items()
+                         if n.startswith("gnss_pos_scale") or n == "imu_time_offset"))
+        if k not in gpositions:
+            prod = apply(ctx, model, theta, shifted)
+            gpositions[k] = next((m for m in build_aiding(prod).models
+                                  if m.name == "gnss_pos"), None)
+        return gpositions[k]
+
     def run(theta):
-        t = apply(ctx, model, theta)
+        t = apply(ctx, model, theta, shifted)
         t.windows = sorted(list(ctx.windows) + tuning)
         try:
             res = run_one(t)
@@ -253,11 +280,7 @@ def autotune(ctx: RunContext, model: ImuErrorModel, run_one, build_aiding
             return None
         if not res.complete:
             return None
-        # the GNSS positions the production run would use (its windows only): those inside
-        # the tuning windows are the coast view's measurements
-        prod = apply(ctx, model, theta)
-        gpos = next((m for m in build_aiding(prod).models if m.name == "gnss_pos"), None)
-        coast = coast_rows(res.forward, gpos, tuning)
+        coast = coast_rows(res.forward, production_gpos(theta), tuning)
         return pd.concat([res.innovations, coast], ignore_index=True) if len(coast) else \
             res.innovations
 
@@ -269,12 +292,14 @@ def autotune(ctx: RunContext, model: ImuErrorModel, run_one, build_aiding
             cache[k] = run(theta)
         return cache[k]
 
+    t_start = time.perf_counter()
     sweeps = int(ctx.job["filter"]["autotune_sweeps"])
     log = lambda line: _log.info("autotune: %s", line)  # noqa: E731
     # stage 1: the one-step view only, from the priors (a model far off makes the dead
     # reckoning of the coast view diverge, and its likelihood surface rugged)
     first = tune(cached, params, sweeps=sweeps, types=ONE_STEP, progress=log)
     if not tuning:
+        first.seconds = time.perf_counter() - t_start
         return first.values, first
     # stage 2: both views, from the one-step estimates
     start = [replace(p, prior=min(max(first.values[p.name], p.lower), p.upper)) for p in params]
@@ -287,6 +312,8 @@ def autotune(ctx: RunContext, model: ImuErrorModel, run_one, build_aiding
     second.evaluations += first.evaluations
     second.sweeps += first.sweeps
     second.tuning_windows = [list(w) for w in tuning]
+    second.one_step_evaluations = first.evaluations
+    second.seconds = time.perf_counter() - t_start
     values = second.values
     return values, second
 
