@@ -56,3 +56,36 @@ def test_time_offset_estimation_names_too_few_moving_epochs(recording):
     with pytest.raises(InsgnssError) as exc:
         estimate_time_offset(imu, gnss.loc[:25.0])  # the static start only
     assert "moving" in str(exc.value) and "turning" not in str(exc.value)
+
+
+def _static_car(explicit: bool):
+    """The bundled highway scenario cut to its 100 s parked start: no motion to estimate from."""
+    import tomllib
+    from pathlib import Path
+
+    from insgnss.config import load_job_dict
+
+    path = Path(__file__).resolve().parents[1] / "scenarios" / "car_highway_tactical_outages.toml"
+    data = tomllib.loads(path.read_text())
+    data["scenario"]["duration"] = 100.0
+    if explicit:
+        data.setdefault("inputs", {}).setdefault("imu", {})["estimate_time_offset"] = True
+    return load_job_dict(data, path)
+
+
+def test_profile_time_offset_without_motion_warns_and_keeps_the_tags():
+    """A car profile's default estimate on a parked-only log: warned, offset 0, run completes;
+    the same estimate asked for by the job itself stops with the reason."""
+    from insgnss.errors import InsgnssWarning, InvalidValueError
+    from insgnss.job.run import run_job
+
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        res = run_job(_static_car(False), progress=False)
+    msgs = [str(w.message) for w in caught if issubclass(w.category, InsgnssWarning)]
+    assert any("time-offset estimate is skipped" in m and "moving" in m for m in msgs), msgs
+    assert res.summary["complete"]
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        with pytest.raises(InvalidValueError, match="moving GNSS epochs"):
+            run_job(_static_car(True), progress=False)

@@ -9,8 +9,10 @@ import time
 from pathlib import Path
 
 from ..config import Job, check_job_against_data
+from ..errors import InvalidValueError
 from ..policies import check_imu_table, gap_policy, shift_report
 from ..preprocess import estimate_time_offset, estimate_velocity_lag, shift_time
+from ..validate import warn
 from .context import RunContext
 from .inputs import Inputs, imu_model, load_inputs
 from .outputs import write_outputs
@@ -45,8 +47,7 @@ def prepare(job: Job, *, progress: bool | None = None, seed: int | None = None,
     windows = outage_windows(job, all_gnss)
     preprocessing = {} if window is None else {"processing_window": list(window)}
     if job["inputs"]["imu"]["estimate_time_offset"] and inputs.gnss is not None:
-        dt, info = estimate_time_offset(inputs.imu, inputs.gnss, windows,
-                                        min_speed=job["inputs"]["imu"]["time_offset_min_speed"])
+        dt, info = _time_offset(job, inputs, windows)
         inputs.imu = shift_time(inputs.imu, dt)
         imu_report = shift_report(imu_report, dt)
         inputs.imu.attrs.update({k: imu_report[k] for k in ("gaps", "segments",
@@ -64,6 +65,23 @@ def prepare(job: Job, *, progress: bool | None = None, seed: int | None = None,
     return RunContext(job=job, inputs=inputs, model=model, windows=windows,
                       imu_report=imu_report, t_start=t_start, preprocessing=preprocessing,
                       timing={"read": t_read}, progress=bool(show))
+
+
+def _time_offset(job: Job, inputs: Inputs, windows) -> tuple[float, dict]:
+    """IMU-GNSS time offset (:func:`insgnss.preprocess.estimate_time_offset`). A job that asks
+    for the estimate itself gets the error when the data cannot support one (too little motion
+    or turning); when the request comes from the platform profile, the run warns and keeps the
+    recorded time tags (offset 0), as the velocity-lag estimate does without evidence."""
+    key = "inputs.imu.estimate_time_offset"
+    try:
+        return estimate_time_offset(inputs.imu, inputs.gnss, windows,
+                                    min_speed=job["inputs"]["imu"]["time_offset_min_speed"])
+    except InvalidValueError as e:
+        if key in job.given:
+            raise
+        warn(f"the platform profile's IMU-GNSS time-offset estimate is skipped and the time "
+             f"tags are kept: {e}", file=job.path, column=key)
+        return 0.0, {"applied": False, "reason": str(e)}
 
 
 def run_job(job: Job, *, progress: bool | None = None, seed: int | None = None,
