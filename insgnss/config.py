@@ -650,6 +650,9 @@ SCHEMA: dict[str, Any] = {
                               min_imu_intervals=1),
         "nhc_misalignment": _spec(bool, False, "estimate IMU-to-vehicle pitch/yaw misalignment",
                                   when=_on("aiding.nhc")),
+        "nhc_pitch_compliance": _spec(bool, False, "estimate the suspension's pitch per unit "
+                                      "forward acceleration (squat/dive) in the vertical NHC",
+                                      when=_on("aiding.nhc")),
         "cupt": _spec(bool, False, "control-point updates (inputs.control_points)"),
         "odometer": _spec(bool, False, "odometer speed updates"),
         "odometer_std": _spec(_NUM, 0.1, "odometer speed sigma [m/s]", check=POSITIVE,

@@ -69,6 +69,8 @@ def _perturbed(nav, d):
     # a larger gyro-bias estimate means a smaller compensated rate
     out.omega_ib = nav.omega_ib - d[9:12]
     out.omega_ib_mean = nav.omega_ib_mean - d[9:12]
+    out.f_ib = nav.f_ib - d[12:15]  # and of the accelerometer bias, a smaller specific force
+    out.f_ib_mean = nav.f_ib_mean - d[12:15]
     out.segment_duration = nav.segment_duration
     return out
 
@@ -147,6 +149,40 @@ def test_body_velocity_jacobian_with_scale_and_misalignment():
     assert H[1, lay["odo_scale"]][0] != 0 and np.any(H[:, lay["mis"]] != 0)
     nhc = BodyVelocity(np.arange(3.0), values=0.0, axes=(0, 2), std=[0.1, 0.2])
     assert nhc.values.shape == (3, 2) and np.allclose(nhc.std[:, 1], 0.2)
+
+
+def test_nhc_pitch_compliance_value_and_jacobian():
+    """The vertical NHC with a suspension pitch-compliance state: a body pitched up by
+    kappa a_f from its velocity (squat) satisfies it exactly; H (velocity, attitude, forward
+    accelerometer bias, kappa) matches the numerical derivatives."""
+    m = BodyVelocity([10.0], values=0.0, axes=(0, 2), std=0.1, misalignment_state="mis",
+                     pitch_compliance_state="kappa")
+    lay = StateLayout(False, m.extra_states())
+    kappa, speed, pitch_road = 0.006, 12.0, 0.03
+    a_f = 1.5  # forward acceleration [m/s^2]: the body is pitched up by kappa a_f
+    pitch = pitch_road + kappa * a_f
+    vel = speed * np.array([np.cos(pitch_road) * np.sin(0.4), np.cos(pitch_road) * np.cos(0.4),
+                            np.sin(pitch_road)])
+    nav = _nav(lay, vel=vel, rpy=(0.0, pitch, 0.4), omega=(0.0, 0.0, 0.0),
+               params=np.r_[np.zeros(6), 0.0, 0.0, 0.0, kappa])
+    from insgnss.earth import normal_gravity
+    g = normal_gravity(nav.lat, nav.height)
+    # specific force of that forward acceleration: a_f = f_y - g C[2, 1]
+    nav.f_ib = nav.f_ib_mean = np.array([0.0, a_f + g * nav.C[2, 1], g * nav.C[2, 2]])
+    z = m.evaluate(0, nav)[0]
+    # exactly up to the small-angle term v ((kappa a_f)^3 / 3 - ...): 3e-6 m/s here
+    assert abs(z[1]) < 1e-5 and abs(z[0]) < 1e-9
+    # without the term the NHC reads the squat as a vertical velocity -v sin(kappa a_f)
+    z0 = BodyVelocity([10.0], values=0.0, axes=(0, 2), std=0.1).evaluate(0, _nav(
+        StateLayout(), vel=vel, rpy=(0.0, pitch, 0.4), omega=(0.0, 0.0, 0.0)))[0]
+    assert z0[1] == pytest.approx(-speed * np.sin(kappa * a_f), rel=1e-9)
+    # the Jacobian at a general nominal (rates, misalignment, lever arm-free)
+    nav2 = _nav(lay, params=np.r_[np.zeros(6), 0.01, -0.02, 0.005, 0.008])
+    nav2.f_ib = nav2.f_ib_mean = np.array([0.3, 1.1, 9.7])
+    _, H = _check_jacobian(m, nav2)
+    assert H[1, lay.index("kappa")] != 0 and H[1, 13] != 0 and H[0, lay.index("kappa")] == 0
+    with pytest.raises(ValueError, match="vertical axis"):
+        BodyVelocity([1.0], axes=(0,), pitch_compliance_state="kappa")
 
 
 def test_gnss_quality_weighting_and_missing_columns():
@@ -322,3 +358,53 @@ def test_lever_arm_is_needed_and_used():
     rms_bad = np.sqrt(np.mean(eb["east"] ** 2 + eb["north"] ** 2))
     print(nis_good.to_dict(), nis_bad.to_dict(), rms_good, rms_bad)
     assert rms_good < 0.1 and rms_bad > 10 * rms_good
+
+
+def _squatting_car(kappa, duration, rate=50.0):
+    """car_truth whose body pitches up by ``kappa a_f`` from its path (suspension squat/dive;
+    ``a_f`` the forward acceleration, low-passed over 0.5 s like a suspension)."""
+    truth = car_truth(duration, rate)
+    t = truth.index.to_numpy()
+    C = euler_to_dcm(truth["roll"].to_numpy(), truth["pitch"].to_numpy(), truth["heading"].to_numpy())
+    a = np.gradient(truth[["vel_e", "vel_n", "vel_u"]].to_numpy(), t, axis=0)
+    n = int(0.5 * rate)
+    a_f = np.convolve(np.einsum("ki,ki->k", a, C[:, :, 1]), np.ones(n) / n, mode="same")
+    out = truth.copy()
+    out["pitch"] = truth["pitch"] + kappa * a_f
+    return out
+
+
+def test_nhc_pitch_compliance_estimated_and_removes_outage_drift():
+    """A car squats 3 deg/g. Its vertical NHC without the compliance state reads the squat as a
+    pitch error; with the gyros loosely trusted (a noise model at the level of a running
+    engine's vibration, 20 times the white noise, as a static window measures it) that tilts
+    gravity into the forward channel and the 15 s outages drift. The compliance state is
+    recovered (within 3 sigma, sigma < 15 %) and halves the end-of-outage error."""
+    kappa = np.radians(3.0) / 9.80665
+    truth = _squatting_car(kappa, 240.0)
+    model = grade("consumer")
+    rng = np.random.default_rng(7)
+    imu, _ = corrupt_imu(truth, model, rng)
+    gnss = gnss_from_truth(truth, rng, rate=4.0, horizontal_std=0.02, vertical_std=0.03,
+                           velocity_std=0.03, vertical_velocity_std=0.05)
+    init, _ = perturbed_initial(truth, rng, 0.02, 0.03, (0.005, 0.005, 0.01))
+    outages = [(100.0 + 45 * k, 115.0 + 45 * k) for k in range(3)]
+    t_g = gnss.index.to_numpy()
+    keep = np.ones(t_g.size, bool)
+    for a, b in outages:
+        keep &= ~((t_g >= a) & (t_g < b))
+    t = truth.index.to_numpy()
+    tn = np.arange(t[0] + 0.25, t[-1], 0.25)
+    cfg = FilterConfig(imu_model=model.scaled(gyro_arw=20 * model.gyro_arw), smoother=False,
+                       initial_att_std=(0.005, 0.005, 0.01))
+    ends = {}
+    for state in (None, "kappa"):
+        nhc = BodyVelocity(tn, 0.0, axes=(0, 2), std=0.1, name="nhc", pitch_compliance_state=state)
+        res = run_filter(imu, init, [GnssPosition(gnss[keep]), GnssVelocity(gnss[keep]), nhc], cfg)
+        e = nav_errors(res.forward, truth)
+        rows = e.index.get_indexer([b - 0.26 for _, b in outages], method="nearest")
+        ends[state] = np.hypot(e["east"].to_numpy()[rows], e["north"].to_numpy()[rows]).mean()
+        if state:
+            k_est, k_std = res.forward["kappa"].iloc[-1], res.forward["kappa_std"].iloc[-1]
+            assert abs(k_est - kappa) < 3 * k_std and k_std < 0.15 * kappa, (k_est, k_std)
+    assert ends["kappa"] < 0.6 * ends[None], ends

@@ -44,7 +44,7 @@ import pandas as pd
 from numba import njit
 
 from ..attitude import wrap_pi
-from ..earth import OMEGA_E
+from ..earth import OMEGA_E, normal_gravity
 from ..errors import InputFormatError, InvalidValueError
 from .models import ExtraState, StateLayout
 
@@ -145,6 +145,11 @@ class Measurement:
     def __repr__(self) -> str:
         return f"{type(self).__name__}(name={self.name!r}, epochs={self.times.size})"
 
+
+
+#: prior sigma of a land vehicle's suspension pitch compliance [rad / (m/s^2)]: 10 deg/g,
+#: a few times the pitch gradient of passenger cars (a few deg/g), so the data decides
+PITCH_COMPLIANCE_STD = float(np.radians(10.0) / 9.80665)
 
 
 # --- compiled implementation shared by the Python and the high-rate update paths -------------------
@@ -612,8 +617,22 @@ class BodyVelocity(Measurement):
         v_b = C^T v + w_ib x l                (velocity of the point, body frame)
         v_v = (I - [mu x]) v_b                (vehicle frame; mu = IMU-to-vehicle misalignment)
         h_k = (1 + s) v_v[k]  if k is the scaled axis, else v_v[k]
+        h_up += kappa a_f v_v[forward]        (with a pitch-compliance state kappa)
 
-    and ``z = h - measured``. Typical uses:
+    and ``z = h - measured``. The pitch-compliance term is the suspension's pitch: a car body
+    squats (nose up) when it accelerates and dives when it brakes, by ``kappa`` [rad per
+    m/s^2] of forward acceleration ``a_f = f_b[forward] + (C^T g^l)[forward]`` (the mean over
+    the segment since the previous filter epoch; passenger cars: a few deg/g), so the body's
+    forward axis is pitched up by ``kappa a_f`` from the road and the IMU sees a vertical
+    body velocity ``-kappa a_f v_forward`` there. A vertical NHC without this term reads the
+    squat as a pitch error, which tilts gravity into the forward channel (``g kappa a_f``:
+    0.06 m/s^2 at 1 m/s^2 and 3.4 deg/g) and drives along-track drift in a GNSS outage.
+    The term uses the IMU's forward body velocity ``v_f = (C^T v)[forward]`` (the lever arm and
+    misalignment change it by far less than the 1 % that ``kappa a_f`` is of ``v_f``); its
+    Jacobian: ``a_f v_f`` in ``kappa``, ``kappa a_f C[:, 1]`` in ``dv``, ``kappa (a_f C[:, 1]
+    x v - v_f g (C[1, 1], -C[0, 1], 0))`` in ``phi``, ``-kappa v_f`` in the forward
+    accelerometer bias.
+    Typical uses:
 
     - non-holonomic constraint: ``axes=(0, 2)``, ``values=0``, sigmas ~0.05-0.2 m/s;
     - odometer: ``axes=(1,)``, ``values=speed``, ``scale_state="odometer_scale"``.
@@ -636,6 +655,12 @@ class BodyVelocity(Measurement):
         Name of a 3-element IMU-to-vehicle misalignment state (random constant).
     misalignment_std : float
         Initial sigma of the misalignment [rad].
+    pitch_compliance_state : str, optional
+        Name of a 1-element suspension pitch-compliance state ``kappa`` [rad / (m/s^2)]
+        (random constant, zero initial value; needs the vertical axis 2 and the Python update
+        path, not ``high_rate``).
+    pitch_compliance_std : float
+        Initial sigma of ``kappa`` [rad / (m/s^2)].
     high_rate : bool
         Apply it on the engine's compiled high-rate path (at the IMU sample nearest each time).
     """
@@ -646,6 +671,8 @@ class BodyVelocity(Measurement):
                  lever_arm=(0.0, 0.0, 0.0), scale_state: str | None = None, scale_axis: int = 1,
                  scale_std: float = 0.01, scale_psd: float = 0.0,
                  misalignment_state: str | None = None, misalignment_std: float = 0.02,
+                 pitch_compliance_state: str | None = None,
+                 pitch_compliance_std: float = PITCH_COMPLIANCE_STD,
                  gate_probability: float | None = None, name: str | None = None,
                  high_rate: bool = False):
         super().__init__(times, gate_probability, name)
@@ -655,6 +682,11 @@ class BodyVelocity(Measurement):
         k = self.axes.size
         if k == 0 or np.any((self.axes < 0) | (self.axes > 2)):
             raise ValueError("axes must be a non-empty subset of (0, 1, 2)")
+        if pitch_compliance_state and (2 not in self.axes or high_rate):
+            raise ValueError("a pitch-compliance state needs the vertical axis 2 and the Python "
+                             "update path (high_rate=False)")
+        self.pitch_compliance_state = pitch_compliance_state
+        self.pitch_compliance_std = float(pitch_compliance_std)
         v = np.asarray(values, float)
         if v.ndim == 1 and v.size == n:  # one value per epoch
             v = v[:, None]
@@ -680,6 +712,9 @@ class BodyVelocity(Measurement):
                                   labels=(f"{self.misalignment_state}_x",
                                           f"{self.misalignment_state}_y",
                                           f"{self.misalignment_state}_z")))
+        if self.pitch_compliance_state:
+            out.append(ExtraState(self.pitch_compliance_state, 1, self.pitch_compliance_std,
+                                  np.inf, 0.0))
         return out
 
     def compiled(self, layout):
@@ -699,4 +734,22 @@ class BodyVelocity(Measurement):
         return spec
 
     def evaluate(self, i, nav):
-        return _run_compiled(self.compiled(nav.layout), i, nav, nav.omega_ib, 0.0)
+        out = _run_compiled(self.compiled(nav.layout), i, nav, nav.omega_ib, 0.0)
+        if out is None or not self.pitch_compliance_state:
+            return out
+        z, H, R = out
+        ik = nav.layout.index(self.pitch_compliance_state)
+        kappa = nav.params[ik - 9]
+        c1, g = nav.C[:, 1], normal_gravity(nav.lat, nav.height)
+        # forward acceleration: compensated specific force plus gravity (g^l = -g up), body
+        # forward axis; the forward body velocity of the IMU
+        a_f = nav.f_ib_mean[1] - g * c1[2]
+        v_f = float(c1 @ nav.vel)
+        r = int(np.flatnonzero(self.axes == 2)[0])
+        z[r] += kappa * a_f * v_f
+        # nominal minus true: C_nom = (I + [phi x]) C, f_nom = f - db_a
+        H[r, 3:6] += kappa * a_f * c1
+        H[r, 6:9] += kappa * (a_f * cross3(c1, nav.vel) - v_f * g * np.array([c1[1], -c1[0], 0.0]))
+        H[r, 13] -= kappa * v_f
+        H[r, ik] = a_f * v_f
+        return z, H, R

@@ -463,7 +463,8 @@ def build_aiding(job: Job, inputs: Inputs, windows, imu: pd.DataFrame) -> Aiding
         tn = t[0] + np.arange(1, int((t[-1] - t[0]) / a["nhc_interval"])) * a["nhc_interval"]
         m = BodyVelocity(tn, 0.0, axes=(0, 2), std=a["nhc_std"], name="nhc",
                          misalignment_state="nhc_misalignment" if a["nhc_misalignment"]
-                         else None)
+                         else None, pitch_compliance_state="nhc_pitch_compliance"
+                         if a["nhc_pitch_compliance"] else None)
         src.sources.append(Source(
             "aiding.nhc", "nhc", "non-holonomic constraints",
             [Step(int(tn.size), "constraint epochs",
