@@ -651,7 +651,8 @@ SCHEMA: dict[str, Any] = {
         "nhc_misalignment": _spec(bool, False, "estimate IMU-to-vehicle pitch/yaw misalignment",
                                   when=_on("aiding.nhc")),
         "nhc_pitch_compliance": _spec(bool, False, "estimate the suspension's pitch per unit "
-                                      "forward acceleration (squat/dive) in the vertical NHC",
+                                      "forward acceleration (squat/dive) in the vertical NHC "
+                                      "(strapdown process model)",
                                       when=_on("aiding.nhc")),
         "cupt": _spec(bool, False, "control-point updates (inputs.control_points)"),
         "odometer": _spec(bool, False, "odometer speed updates"),

@@ -464,7 +464,9 @@ def build_aiding(job: Job, inputs: Inputs, windows, imu: pd.DataFrame) -> Aiding
         m = BodyVelocity(tn, 0.0, axes=(0, 2), std=a["nhc_std"], name="nhc",
                          misalignment_state="nhc_misalignment" if a["nhc_misalignment"]
                          else None, pitch_compliance_state="nhc_pitch_compliance"
-                         if a["nhc_pitch_compliance"] else None)
+                         # a strapdown error state (RISS takes no extra states: not used there)
+                         if a["nhc_pitch_compliance"]
+                         and job["filter"]["process_model"] == "strapdown" else None)
         src.sources.append(Source(
             "aiding.nhc", "nhc", "non-holonomic constraints",
             [Step(int(tn.size), "constraint epochs",
