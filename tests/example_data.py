@@ -54,6 +54,10 @@ DRIVE = [{"type": "accelerate", "speed": 10.0, "duration": 8.0},
          {"type": "static", "duration": 5.0}]
 
 
+#: walking speed [m/s] of the generated data of a pedestrian job
+WALK_SPEED = 1.4
+
+
 def _move(d: float) -> list[dict]:
     """Segments that leave rest and come back to rest after ``d`` seconds."""
     if d < 30.0:
@@ -77,7 +81,10 @@ def _segments(job: dict) -> list[dict]:
         return segs + _move(60.0) + [{"type": "static", "duration": 5.0}]
     method = ini.get("method", "static")
     start = ini.get("static_duration", 30.0) + 5.0 if method == "static" else 5.0
-    return [{"type": "static", "duration": start}] + DRIVE
+    motion = DRIVE
+    if job.get("job", {}).get("platform") == "pedestrian":  # a walk, not a drive
+        motion = [{**s, "speed": WALK_SPEED} if s.get("speed") else s for s in DRIVE]
+    return [{"type": "static", "duration": start}] + motion
 
 
 def has_gnss(job: dict) -> bool:
