@@ -17,9 +17,22 @@ accelerometer bias, ``sigma_tilt ~ sigma_ba / g``; the heading error by the east
 ``sigma_A ~ sigma_bg / (we cos L)`` (plus white-noise terms shrinking with sqrt(T)).
 
 Gyrocompassing needs a gyro bias well below the horizontal Earth rate (15 deg/h cos L): it
-works with navigation and tactical grades and is impossible with consumer MEMS gyros (biases of
-10-1000 deg/h). For those the heading comes from GNSS velocity once moving, a magnetometer, or is
-given; :func:`default_heading_source` picks per grade.
+works with navigation and ring-laser/FOG tactical grades and is impossible with MEMS gyros,
+tactical MEMS included (in-run stability of about 1 deg/h, but a turn-on bias of tens to hundreds
+of deg/h; consumer parts 10-1000 deg/h). For those the heading comes from GNSS velocity once
+moving, a magnetometer, or is given; :func:`default_heading_source` picks per grade.
+
+Feasibility from the data (:func:`gyrocompass_check`): the preset's bias is a claim about the
+part, the parked window is evidence. Gyrocompassing is used only when both allow the heading
+sigma it would report:
+
+1. the bias plus the white noise of the mean, with the noise *measured* in the window (engine
+   vibration included), ``sqrt(sigma_bg^2 + s_w^2 / N)``, is below
+   :data:`GYROCOMPASS_MAX_BIAS_RATIO` of the horizontal Earth rate ``we cos L``;
+2. the levelled horizontal mean rate agrees with the Earth rate: ``| |w_h| - we cos L |`` is a
+   lower bound of the horizontal gyro bias, so when it exceeds the same fraction the gyros are
+   demonstrably biased beyond what gyrocompassing tolerates, whatever the preset says (a parked
+   MEMS unit reading 130 deg/h horizontally, 12 x Earth rate, would be 30-35 deg off).
 """
 
 from __future__ import annotations
@@ -119,13 +132,73 @@ def can_gyrocompass(model: ImuErrorModel, lat: float) -> bool:
     return bool(bias < GYROCOMPASS_MAX_BIAS_RATIO * horizontal)
 
 
+@dataclass
+class GyrocompassCheck:
+    """Outcome of :func:`gyrocompass_check`: ``feasible``, the expected heading 1-sigma of a
+    gyrocompass [rad] from the preset bias and the measured noise, the levelled horizontal
+    mean rate measured and the horizontal Earth rate [rad/s], and ``reason`` (why not; empty
+    when feasible)."""
+
+    feasible: bool
+    heading_std: float
+    measured_horizontal: float
+    earth_horizontal: float
+    reason: str = ""
+
+
+def gyrocompass_check(model: ImuErrorModel, lat: float, w: np.ndarray, roll: float,
+                      pitch: float) -> GyrocompassCheck:
+    """Can the static samples ``w`` (N, 3) [rad/s, body RFU], levelled with ``roll, pitch``,
+    give a heading by gyrocompassing at latitude ``lat``? (module docstring, tests 1-2).
+
+    The white-noise term uses the sample standard deviation of ``w`` per axis (largest
+    horizontal-plane value after levelling), so vibration of a running engine counts.
+    """
+    w = np.asarray(w, float)
+    horizontal = OMEGA_E * abs(np.cos(lat))
+    limit = GYROCOMPASS_MAX_BIAS_RATIO * horizontal
+    L = Rx(pitch) @ Ry(roll)
+    wl = w @ L.T
+    n = max(wl.shape[0], 1)
+    noise = float(np.max(np.std(wl[:, :2], axis=0))) / np.sqrt(n) if wl.shape[0] > 1 else 0.0
+    bias = float(np.hypot(model.gyro_bias, model.gyro_bias_instability))
+    sigma = float(np.hypot(bias, noise))
+    wh = float(np.hypot(*wl[:, :2].mean(0)))
+    excess = abs(wh - horizontal)
+    hdg_std = sigma / horizontal if horizontal > 0 else np.inf
+    dh = np.degrees(3600.0)
+    if horizontal <= 0 or not np.isfinite(hdg_std):
+        reason = "the horizontal Earth rate vanishes at the pole"
+    elif bias >= limit:
+        reason = (f"the gyro bias of the IMU model ({bias * dh:.3g} deg/h, "
+                  f"{model.name or 'custom'}) is above {GYROCOMPASS_MAX_BIAS_RATIO:g} x the "
+                  f"horizontal Earth rate ({horizontal * dh:.3g} deg/h)")
+    elif sigma >= limit:
+        reason = (f"the gyro noise measured in the static window ({noise * dh:.3g} deg/h on the "
+                  f"mean of {n} samples, with the bias {bias * dh:.3g} deg/h) is above "
+                  f"{GYROCOMPASS_MAX_BIAS_RATIO:g} x the horizontal Earth rate "
+                  f"({horizontal * dh:.3g} deg/h)")
+    elif excess >= limit + 3.0 * sigma:
+        reason = (f"the parked gyros read {wh * dh:.3g} deg/h horizontally against an Earth "
+                  f"rate of {horizontal * dh:.3g} deg/h: a gyro bias of at least "
+                  f"{excess * dh:.3g} deg/h, far above the {bias * dh:.3g} deg/h of the IMU "
+                  f"model ({model.name or 'custom'}); gyrocompassing would be wrong by tens of "
+                  "degrees")
+    else:
+        return GyrocompassCheck(True, float(hdg_std), wh, horizontal)
+    return GyrocompassCheck(False, float(hdg_std), wh, horizontal, reason)
+
+
 def default_heading_source(model: ImuErrorModel, lat: float) -> str:
     """``"gyrocompass"`` for navigation/tactical grades, ``"given"`` otherwise (consumer MEMS:
     use a given heading, GNSS velocity or a magnetometer)."""
     return "gyrocompass" if can_gyrocompass(model, lat) else "given"
 
 
-def _static_means(imu: pd.DataFrame) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, float]:
+def static_means(imu: pd.DataFrame) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, float]:
+    """``(w_mean, f_mean, w, f, T)``: mean angular rate [rad/s] and specific force [m/s^2] of
+    a static window (rates as recorded, increments over their interval), the samples and the
+    window length [s]."""
     t = np.asarray(imu.index, float)
     if t.size < 2:
         raise AlignmentError("alignment window holds fewer than 2 IMU samples",
@@ -225,8 +298,8 @@ def coarse_align(
     heading : float, optional
         Given heading [rad] (``heading_source="given"``).
     heading_source : {"gyrocompass", "given", "magnetometer"}, optional
-        Default: gyrocompass if the grade allows it (see :func:`default_heading_source`), else
-        "given" (then ``heading`` is required).
+        Default: gyrocompass if the grade and the data allow it (:func:`gyrocompass_check`),
+        else "given" (then ``heading`` is required).
     mag : array_like, optional
         Mean magnetometer vector in body RFU for ``heading_source="magnetometer"``.
     check : bool
@@ -238,20 +311,25 @@ def coarse_align(
         Stillness limit on the angular-rate variation [rad/s] (default 1 deg/s or 5x the white
         gyro noise).
     """
-    w_mean, f_mean, w, f, T = _static_means(imu)
+    w_mean, f_mean, w, f, T = static_means(imu)
     g = normal_gravity(lat, height, gravity_model)
     if check:
         dt = T / max(len(imu) - 1, 1)
         check_static(f, w, g, model, dt, t0=float(imu.index[0]), max_accel_std=max_accel_std,
                      max_rate=max_rate_std)
     roll, pitch = level(f_mean)
+    why = f"gyro bias above {GYROCOMPASS_MAX_BIAS_RATIO:g} x the horizontal Earth rate"
     if heading_source is None:
         if heading is not None:
             heading_source = "given"
         elif mag is not None:
             heading_source = "magnetometer"
+        elif model is None:
+            heading_source = "gyrocompass"
         else:
-            heading_source = "gyrocompass" if model is None else default_heading_source(model, lat)
+            check_ = gyrocompass_check(model, lat, w, roll, pitch)
+            heading_source = "gyrocompass" if check_.feasible else "given"
+            why = check_.reason
     if heading_source == "gyrocompass":
         A = gyrocompass(w_mean, roll, pitch)
     elif heading_source == "magnetometer":
@@ -261,9 +339,9 @@ def coarse_align(
     elif heading_source == "given":
         if heading is None:
             raise AlignmentError(
-                "gyrocompassing is impossible with this IMU grade (gyro bias above 25 % of the "
-                "horizontal Earth rate): give an initial heading, a magnetometer or use GNSS "
-                "velocity heading", expected="heading=...", found="none")
+                f"gyrocompassing is impossible here ({why}): give an initial heading, a "
+                "magnetometer or use GNSS velocity heading", expected="heading=...",
+                found="none")
         A = float(np.mod(heading, 2 * np.pi))
     else:
         raise AlignmentError(f"unknown heading source {heading_source!r}",

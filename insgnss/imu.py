@@ -284,10 +284,18 @@ class ImuErrorModel:
         return replace(self, **changes)
 
 
-#: Grade presets. Values are typical of the class, not of one product; sources:
-#: Groves (2013) table 4.1 and section 4.4; Noureldin et al. (2013) table 4.2; datasheets of
-#: Honeywell HG9900 (navigation), HG1700 / KVH 1750 (tactical), Bosch BMI088 / TDK ICM-20948
-#: (consumer MEMS).
+#: Grade presets. Values are typical of the class, not of one product (docs/filter.md, "IMU
+#: grade presets", lists every number); sources: Groves (2013) table 4.1 and section 4.4;
+#: Noureldin et al. (2013) table 4.2; datasheets of Honeywell HG9900 (navigation), HG1700 (RLG)
+#: and KVH 1750 (FOG) (tactical), Honeywell HG4930, Analog Devices ADIS16495-1, Epson G370 and
+#: Safran STIM300 (tactical MEMS), Bosch BMI088 / TDK ICM-20948 (consumer MEMS).
+#:
+#: The turn-on bias is the run-to-run (repeatability, over temperature) 1-sigma the filter must
+#: start from; the bias instability the in-run floor of the Allan deviation. They differ most for
+#: MEMS parts: a tactical MEMS gyro drifts by about 1 deg/h within a run but turns on tens to a
+#: few hundred deg/h away from its last calibration (ADIS16495-1: 0.8 deg/h in-run, Epson G370:
+#: 0.8 deg/h in-run and an initial bias of up to 0.1 deg/s = 360 deg/h), which rules out
+#: gyrocompassing (the horizontal Earth rate is 15 cos(lat) deg/h).
 GRADES: dict[str, ImuErrorModel] = {
     "navigation": ImuErrorModel.from_datasheet(
         gyro_bias_deg_h=0.003, accel_bias_mg=0.025,
@@ -307,6 +315,16 @@ GRADES: dict[str, ImuErrorModel] = {
         gyro_misalignment_mrad=0.1, accel_misalignment_mrad=0.1,
         name="tactical", source="HG1700/KVH1750-class; Groves 2013 table 4.1",
     ),
+    "tactical_mems": ImuErrorModel.from_datasheet(
+        gyro_bias_deg_h=100.0, accel_bias_mg=2.0,
+        gyro_bias_instability_deg_h=1.0, accel_bias_instability_ug=20.0,
+        bias_correlation_time_s=600.0,
+        gyro_arw_deg_sqrt_h=0.1, accel_vrw_m_s_sqrt_h=0.03,
+        gyro_scale_ppm=500.0, accel_scale_ppm=300.0,
+        gyro_misalignment_mrad=0.5, accel_misalignment_mrad=0.5,
+        name="tactical_mems",
+        source="HG4930/ADIS16495/G370/STIM300-class MEMS: deg/h in-run, ~100 deg/h turn-on",
+    ),
     "consumer": ImuErrorModel.from_datasheet(
         gyro_bias_deg_h=360.0, accel_bias_mg=20.0,
         gyro_bias_instability_deg_h=10.0, accel_bias_instability_ug=100.0,
@@ -321,7 +339,8 @@ GRADES["mems"] = GRADES["consumer"]
 
 
 def grade(name: str) -> ImuErrorModel:
-    """Look up a grade preset: ``"navigation"``, ``"tactical"`` or ``"consumer"`` (``"mems"``)."""
+    """Look up a grade preset: ``"navigation"``, ``"tactical"``, ``"tactical_mems"`` or
+    ``"consumer"`` (``"mems"``)."""
     try:
         return GRADES[name.lower()]
     except KeyError:

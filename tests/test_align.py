@@ -126,3 +126,53 @@ def test_level_moving_removes_the_vehicle_acceleration():
             assert tilt > 0.5 * np.arctan(np.hypot(acc[0], acc[1]) / g)
         else:
             assert tilt < 1e-12 and level_moving(f_b, acc, h) == (r0, p0)
+
+
+def test_tactical_mems_preset_cannot_gyrocompass():
+    """HG4930/ADIS16495 class: deg/h in-run stability, but ~100 deg/h turn-on bias."""
+    model = grade("tactical_mems")
+    assert np.degrees(model.gyro_bias) * 3600 == pytest.approx(100.0)
+    assert np.degrees(model.gyro_bias_instability) * 3600 == pytest.approx(1.0)
+    assert align.default_heading_source(model, LAT45) == "given"
+    imu, _, _ = _noisy_static(model, 0.01, 0.02, 1.0, duration=30.0)
+    _, _, w, _, _ = align.static_means(imu)
+    chk = align.gyrocompass_check(model, LAT45, w, 0.01, 0.02)
+    assert not chk.feasible and "gyro bias of the IMU model (100 deg/h" in chk.reason
+    with pytest.raises(AlignmentError, match="gyro bias of the IMU model"):
+        align.coarse_align(imu, LAT45, model=model)
+
+
+def test_biased_gyros_refuse_gyrocompass_although_the_preset_allows_it():
+    """A 'tactical' job on gyros that read 130 deg/h horizontally (12 x Earth rate at 45 deg):
+    the data shows the bias; gyrocompassing would be tens of degrees off."""
+    model = grade("tactical")
+    bg = np.radians(np.array([120.0, 50.0, 0.0])) / 3600  # 130 deg/h horizontal
+    imu, _, _ = _noisy_static(model, 0.01, 0.02, np.radians(250.0), gyro_bias=bg)
+    _, _, w, _, _ = align.static_means(imu)
+    chk = align.gyrocompass_check(model, LAT45, w, 0.01, 0.02)
+    assert not chk.feasible and "parked gyros read" in chk.reason
+    assert np.degrees(chk.measured_horizontal) * 3600 == pytest.approx(130.0, abs=12.0)
+    with pytest.raises(AlignmentError, match="parked gyros read"):
+        align.coarse_align(imu, LAT45, model=model)
+    # the same gyros without the bias: feasible, and the heading within the claimed 3 sigma
+    imu, _, _ = _noisy_static(model, 0.01, 0.02, np.radians(250.0), seed=3)
+    _, _, w, _, _ = align.static_means(imu)
+    chk = align.gyrocompass_check(model, LAT45, w, 0.01, 0.02)
+    assert chk.feasible and chk.reason == ""
+    res = align.coarse_align(imu, LAT45, model=model)
+    err = np.angle(np.exp(1j * (res.heading - np.radians(250.0))))
+    assert abs(err) < 3 * chk.heading_std
+
+
+def test_vibration_noise_refuses_gyrocompass():
+    """Engine vibration: 1 deg/s of measured rate noise per sample over 10 s at 100 Hz leaves
+    0.01 deg/s = 36 deg/h on the mean, above 25 % of the horizontal Earth rate."""
+    model = grade("tactical")
+    imu, _, _ = _noisy_static(model, 0.01, 0.02, 1.0, duration=10.0, gyro_bias=np.zeros(3))
+    rng = np.random.default_rng(5)
+    cols = ["dtheta_x", "dtheta_y", "dtheta_z"]
+    imu[cols] = imu[cols].to_numpy() + rng.normal(0, np.radians(1.0) * 0.01, (len(imu), 3))
+    _, _, w, _, _ = align.static_means(imu)
+    chk = align.gyrocompass_check(model, LAT45, w, 0.01, 0.02)
+    assert not chk.feasible and "noise measured in the static window" in chk.reason
+    assert np.degrees(chk.heading_std) > 14.0

@@ -39,7 +39,14 @@ from dataclasses import dataclass
 import numpy as np
 import pandas as pd
 
-from ..align import can_gyrocompass, coarse_align, gyrocompass, level_moving
+from ..align import (
+    GYROCOMPASS_MAX_BIAS_RATIO,
+    coarse_align,
+    gyrocompass,
+    gyrocompass_check,
+    level_moving,
+    static_means,
+)
 from ..attitude import euler_to_dcm
 from ..checks import check_gyro_at_rest, check_upright, static_window_error
 from ..config import Job
@@ -283,9 +290,6 @@ def _initialize(job: Job, inputs: Inputs, model: ImuErrorModel, windows) -> Init
     heading = None if given[2] is None else np.radians(given[2])
     lat_guess = float(gnss["lat"].iloc[0]) if gnss is not None and len(gnss) else \
         float(inputs.truth["lat"].iloc[0]) if inputs.truth is not None else float(fixed[0])
-    src = "given" if heading is not None else ("gyrocompass" if can_gyrocompass(model, 0.0 if
-                                               gnss is None else lat_guess)
-                                               else "gnss_course")
     max_rate = np.radians(ini["static_max_rate_std_deg"])
     imu_file = inputs.imu.attrs.get("source")
     # deg/s declared as rad/s also fails the stillness test (57 times the noise): name it first
@@ -293,30 +297,47 @@ def _initialize(job: Job, inputs: Inputs, model: ImuErrorModel, windows) -> Init
     try:
         res = coarse_align(win, lat_guess, 0.0, model=model,
                            heading=heading if heading is not None else 0.0,
-                           heading_source="given" if src != "gyrocompass" else "gyrocompass",
+                           heading_source="given",
                            max_accel_std=ini["static_max_accel_std"], max_rate_std=max_rate)
     except AlignmentError as exc:  # name the key when the window reaches into motion
         raise static_window_error(exc, win, ini["static_duration"], ini["static_max_accel_std"],
                                   max_rate, file=job.path) from None
     check_upright(res.roll, res.pitch, what="static levelling", file=imu_file)
-    w_mean = win[GYRO_COLS].to_numpy().mean(0) if GYRO_COLS[0] in win.columns else None
+    w_mean, _, w_static, _, T = static_means(win)
+    compass = None
+    if heading is not None:
+        src = "given"
+    else:
+        # the preset's bias and the parked data must both allow gyrocompassing (align module)
+        compass = gyrocompass_check(model, lat_guess, w_static, res.roll, res.pitch)
+        src = "gyrocompass" if compass.feasible else "gnss_course"
+        if not compass.feasible:
+            warn(f"static alignment: no gyrocompassing because {compass.reason}; levelled, the "
+                 "heading comes from the GNSS course once faster than initialization.min_speed",
+                 file=job.path, column="initialization.method", expected="a gyrocompass heading "
+                 f"1-sigma <= {np.degrees(GYROCOMPASS_MAX_BIAS_RATIO):.3g} deg",
+                 found=f"{np.degrees(compass.heading_std):.3g} deg")
     t_end = res.time
     hdg = res.heading
     if job["filter"]["levelling_correlation"]:
         # the tilt error of levelling is the horizontal accelerometer bias over g, modelled as
         # a correlation with the bias states (FilterConfig.levelling_correlation): the tilt
         # sigma here is only the white-noise part (VRW over the window), floored at 0.02 deg
-        T = max(float(win.index[-1] - win.index[0]), 1e-3)
+        T = max(T, 1e-3)
         tilt = max(model.accel_vrw / np.sqrt(T) / 9.81, np.radians(0.02))
         tilt = (tilt, tilt)
     else:
         tilt = (max(res.roll_std, np.radians(0.1)), max(res.pitch_std, np.radians(0.1)))
-    att_std = (*tilt, res.heading_std if np.isfinite(res.heading_std) else np.radians(5.0))
+    att_std = (*tilt, np.radians(5.0))
     if src == "gnss_course":
-        hdg = _heading_from_course(imu, gnss, all_gnss, windows, res, ini["min_speed"], w_mean)
+        hdg = _heading_from_course(imu, gnss, all_gnss, windows, res, ini["min_speed"],
+                                   w_mean if GYRO_COLS[0] in win.columns else None,
+                                   compass.reason)
         att_std = (att_std[0], att_std[1], np.radians(ini["course_heading_std_deg"]))
     elif src == "gyrocompass":
-        hdg = gyrocompass(w_mean, res.roll, res.pitch) if w_mean is not None else res.heading
+        hdg = gyrocompass(w_mean, res.roll, res.pitch)
+        # bias and measured noise over the Earth rate, with the tilt-induced term (Groves 5.108)
+        att_std = (*tilt, float(np.hypot(compass.heading_std, res.roll_std * np.tan(lat_guess))))
     C = euler_to_dcm(res.roll, res.pitch, hdg)
     # the vehicle is still over the window, so the aligned attitude holds from its start: the
     # filter runs from there (covering the window, with ZUPT/ZARU if enabled)
@@ -406,12 +427,15 @@ def _static_window(job: Job, imu: pd.DataFrame, gnss, windows, t0: float):
     return imu.loc[a0:a1], info, (a0, a1) if truly else None
 
 
-def _heading_from_course(imu, gnss, all_gnss, windows, res, min_speed, w_mean) -> float:
+def _heading_from_course(imu, gnss, all_gnss, windows, res, min_speed, w_mean,
+                         why: str = "") -> float:
     """Heading at the end of the static window: the course over ground at the first usable
-    GNSS epoch faster than ``min_speed`` minus the heading change the gyros measured since."""
+    GNSS epoch faster than ``min_speed`` minus the heading change the gyros measured since
+    (``why``: the reason gyrocompassing was not used, for the message)."""
     if gnss is None or "vel_e" not in gnss.columns:
-        raise ConfigError("the IMU cannot gyrocompass: give initialization.heading_deg or GNSS "
-                          "velocity", column="initialization.heading_deg")
+        raise ConfigError(f"the IMU cannot gyrocompass{' (' + why + ')' if why else ''}: give "
+                          "initialization.heading_deg or GNSS velocity",
+                          column="initialization.heading_deg")
     t_last = float(imu.index[-1])
     k = _moving_epochs(gnss, min_speed, res.time, t_last, strict=True)
     if not k.size:
