@@ -415,12 +415,14 @@ def foot_measurements(t, gyro, still, stat, bg0, cfg: FootConfig) -> list:
     stat = np.asarray(stat, float)
     if cfg.zupt_noise_exponent > 0 and np.all(np.isfinite(stat)):
         sigma *= np.maximum(1.0, stat / cfg.zupt_noise_ref) ** cfg.zupt_noise_exponent
-    out = [Zupt(t[upd], std=sigma[upd], high_rate=True)]
+    # a detected stance is rest (the foot's only re-anchor): the gate recovery may force it in
+    out = [Zupt(t[upd], std=sigma[upd], high_rate=True, recoverable=True)]
     if cfg.zaru:
         z = upd.copy()
         if cfg.zaru_max_rate < np.inf:
             z &= np.linalg.norm(gyro - bg0, axis=1) < cfg.zaru_max_rate
-        out.append(Zaru(t[z], std=cfg.sigma_zaru, average=False, high_rate=True))
+        out.append(Zaru(t[z], std=cfg.sigma_zaru, average=False, high_rate=True,
+                        recoverable=True))
     return out
 
 

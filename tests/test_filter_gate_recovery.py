@@ -68,3 +68,68 @@ def test_sparse_rejections_do_not_trigger_recovery(sim):
     rej = res.rejected["time"].to_numpy()
     assert set(np.round(bad.to_numpy(), 6)) <= set(np.round(rej, 6))
     assert not res.innovations["recovered"].any()
+
+
+def _lost(sim, **cfg):
+    r = sim.truth.iloc[0]
+    x0 = NavState.from_euler(r.lat, r.lon, r.height, (r.vel_e, r.vel_n, r.vel_u), r.roll,
+                             r.pitch, r.heading + np.radians(25.0))
+    c = FilterConfig(imu_model="tactical", smoother=False,
+                     initial_att_std=(np.radians(0.2), np.radians(0.2), np.radians(0.5)), **cfg)
+    return run_filter(sim.imu, x0, [GnssPosition(sim.gnss)], c)
+
+
+def test_runaway_nis_counts_only_after_a_recovery(sim):
+    """The 25 deg heading error drives the GNSS NIS far above the runaway bound before the
+    recovery; the run that recovered is not stopped (issue 22), the one without recovery is."""
+    kw = {"nis_window": 10.0, "nis_min_count": 5}
+    res = _lost(sim, gate_recovery=5.0, **kw)
+    inn = res.innovations
+    t_rec = inn.loc[inn.recovered, "time"].min()
+    before = inn[inn.time < t_rec]
+    assert np.median(before.nis.to_numpy()[-5:] / 3.0) > 25.0  # would have tripped the check
+    assert res.complete, res.error
+    off = _lost(sim, gate_recovery=None, **kw)
+    assert not off.complete and "runaway NIS" in str(off.error)
+
+
+def test_runaway_restart_empties_the_windows():
+    from insgnss.errors import FilterHealthError
+    from insgnss.filter.health import RunawayNis
+
+    rw = RunawayNis(2, window=10.0, bound=25.0, min_count=3)
+    for k in range(2):
+        rw.push(0, "gnss_pos", float(k), 100.0)
+    rw.restart()
+    rw.push(0, "gnss_pos", 2.0, 100.0)  # 3 values in the window, but only 1 after the restart
+    rw.push(0, "gnss_pos", 3.0, 100.0)
+    with pytest.raises(FilterHealthError, match="runaway NIS"):
+        rw.push(0, "gnss_pos", 4.0, 100.0)  # stays high after the restart: stopped
+
+
+def test_violated_constraint_is_never_forced_in(sim):
+    """A lateral-velocity constraint violated by 0.8 m/s from the turn on (a skidding car, an
+    IMU far from the rear axle): rejected for longer than the recovery time, never
+    force-applied; the same measurement declared recoverable is."""
+    from insgnss.filter.measurements import BodyVelocity
+
+    t = sim.imu.index.to_numpy(float)
+    tn = t[::25][1:]
+    w = sim.truth["heading"].reindex(tn, method="nearest").diff().abs().to_numpy()
+    turning = np.cumsum(np.nan_to_num(w) > np.radians(1.0)) > 0  # 10 deg/s over 0.5 s
+    lateral = np.where(turning, 0.8, 0.0)
+    r = sim.truth.iloc[0]
+    x0 = NavState.from_euler(r.lat, r.lon, r.height, (r.vel_e, r.vel_n, r.vel_u), r.roll,
+                             r.pitch, r.heading)
+    cfg = FilterConfig(imu_model="tactical", smoother=False, gate_recovery=2.0)
+    out = {}
+    for rec in (False, True):
+        cls = type("Nhc", (BodyVelocity,), {"recoverable": rec})
+        nhc = cls(tn, lateral, axes=(0,), std=0.05, name="nhc")
+        res = run_filter(sim.imu, x0, [GnssPosition(sim.gnss), nhc], cfg)
+        inn = res.innovations[res.innovations.type == "nhc"]
+        assert res.complete  # the rejected constraint does not stop the run (health.py)
+        out[rec] = (int((~inn.accepted & np.isin(inn.time, tn[turning])).sum()),
+                    int(inn.recovered.sum()))
+    assert out[False][0] > 100 and out[False][1] == 0  # rejected throughout, never forced in
+    assert out[True][0] >= 3 and out[True][1] >= 1

@@ -321,7 +321,13 @@ class _Run:
                 names.append(m.name)
         self.tid = {name: i for i, name in enumerate(names)}
         self.gates = GateTable(config.gate_probability, config.gate_probabilities)
-        self.recovery = -1.0 if config.gate_recovery is None else float(config.gate_recovery)
+        # gate recovery time per type; -1 (never) for types that may not be forced in
+        # (Measurement.recoverable: constraints such as NHC, a vehicle's ZUPT, odometer)
+        rec = -1.0 if config.gate_recovery is None else float(config.gate_recovery)
+        absolute = np.zeros(max(len(names), 1), bool)
+        for m in self.general + self.fast:
+            absolute[self.tid[m.name]] |= bool(getattr(m, "recoverable", False))
+        self.recovery = np.where(absolute, rec, -1.0)
         self.streak = np.zeros((max(len(names), 1), 3))
         self.streak_rows: dict = {}  # (type, row label) -> row of streak (labelled rows)
         self.last_accept = np.full(max(len(names), 1), -np.inf)  # per type
@@ -332,9 +338,11 @@ class _Run:
         tol = min(config.snap_tolerance, 1e-3 * float(np.median(np.diff(t))))
         self.sched = build_schedule(t, [m.times for m in self.general], config.epoch_interval,
                                     tol, model.split, [m.times for m in self.fast])
+        # the constraints are watched only in runs without absolute measurements (health.py)
         self.runaway = RunawayNis(len(names), config.nis_window if self.check else None,
                                   config.nis_bound, config.nis_min_count,
-                                  _window_capacity(self, config.nis_window))
+                                  _window_capacity(self, config.nis_window),
+                                  watched=absolute if absolute.any() else None)
         n = model.layout.n
         self.hr = highrate.HighRate(self.fast, model, self) if self.fast else None
         pat = self.hr.pattern if self.hr is not None else None
@@ -431,11 +439,13 @@ def _gate(run: _Run, m, time: float, z, H, R, P, label: str = ""):
     run.runaway.push(tid, m.name, time, nis / z.size)
     thr = run.gates.threshold(run.gates.probability(m), z.size)
     row = _streak_row(run, tid, label)  # may grow run.streak: before passing the array
-    code = gating.gate_step(run.streak, row, time, nis, thr, run.recovery)
+    rec = run.recovery[tid]  # -1 for a type that may not be forced in
+    code = gating.gate_step(run.streak, row, time, nis, thr, rec)
     if code == gating.RECOVER and label and \
-            not gating.type_lost(run.last_accept[tid], time, run.recovery):
+            not gating.type_lost(run.last_accept[tid], time, rec):
         code = gating.REJECT  # the other rows of the type are accepted: this row is bad
     if code == gating.RECOVER:
+        run.runaway.restart()  # the NIS before the recovery no longer counts (health.py)
         P = P.copy()
         S = gating.inflate_for(P, H, R, z, thr, run.model.n_nav)
         nis = gating.nis(S, z)

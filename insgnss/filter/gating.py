@@ -20,6 +20,16 @@ measurement sits at half its gate, and it is applied (logged ``recovered``). A g
 the recovery time without rejections (e.g. between two stops for ZUPT) starts a new streak, so
 sparse measurements are not force-applied.
 
+Recovery applies only to absolute measurements that can re-anchor the state
+(:attr:`~insgnss.filter.measurements.Measurement.recoverable`: GNSS position and velocity,
+control points, pseudoranges and Doppler): after an outage, a wrong covariance is corrected by
+such a fix. A constraint that is only approximately true - the non-holonomic constraint in a
+skidding turn, a ZUPT on a vehicle that creeps, an odometer on a slipping wheel - is never forced
+in: its persistent rejection means the constraint is violated, and inflating ``P`` to accept
+it turns the attitude to fit a wrong measurement (issue 22: 16 deg of heading in 2.5 s). The
+engine passes ``recovery = -1`` (never) for those types. After a recovery the runaway-NIS
+windows restart (:mod:`.health`).
+
 The streak state of all measurement types is one array ``streak[type] = (first, last, count)``
 (``count = 0``: no streak), so both update paths share it.
 

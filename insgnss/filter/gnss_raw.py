@@ -186,6 +186,7 @@ class RawGnssMeasurement(Measurement):
     """
 
     name = "gnss_raw"
+    recoverable = True  # absolute ranges re-anchor the state (gating.py)
 
     def __init__(self, prepared: pd.DataFrame, ionosphere: pd.DataFrame | None = None,
                  lever_arm=(0.0, 0.0, 0.0), config: GnssModelConfig | None = None,

@@ -9,6 +9,18 @@ measurements sit 5 sigma away most of the time: the filter diverged or its noise
 wrong, and its solution should not be trusted silently. The median is evaluated at most once per
 second per type.
 
+After a gate recovery (:mod:`.gating`: the covariance was inflated, the state re-anchored) the
+windows of all types restart empty (:func:`runaway_restart`): the NIS values before it describe
+the state that was abandoned, so a run that recovered is stopped only if the median stays above
+``bound`` over at least ``min_count`` measurements *after* the recovery.
+
+Only measurements that judge the filter are watched: when a run has absolute measurements
+(:attr:`~insgnss.filter.measurements.Measurement.recoverable`, e.g. GNSS), the constraints
+(NHC, a vehicle's ZUPT, odometer) are not - their persistent rejection while the GNSS is accepted
+means the constraint is violated (a skidding turn, a lever arm left out), which the gate and the
+rejection counts of the summary report, not a diverged filter. Without absolute measurements
+every type is watched. (An unwatched type keeps ``+inf`` as the time of its last check.)
+
 The Python wrappers raise :class:`insgnss.errors.FilterHealthError`; the engine catches it and
 returns what was computed up to the last good epoch.
 """
@@ -85,12 +97,19 @@ def runaway_push(buf_t, buf_v, state, tid, time, nnis, window, min_count, bound,
     return -1.0
 
 
+@njit(cache=True)
+def runaway_restart(state):
+    """Empty the runaway-NIS windows of all types (after a gate recovery; module docstring)."""
+    for tid in range(state.shape[0]):
+        state[tid, 1] = 0.0
+
+
 class RunawayNis:
     """Runaway-NIS monitor of all measurement types (module docstring); ``window=None``
-    disables it."""
+    disables it; ``watched`` (bool per type, default all) selects the types checked."""
 
     def __init__(self, n_types: int, window: float | None, bound: float, min_count: int,
-                 capacity: int = 64):
+                 capacity: int = 64, watched=None):
         self.enabled = window is not None
         self.window = float(window) if window is not None else np.inf
         self.bound = float(bound)
@@ -100,6 +119,8 @@ class RunawayNis:
         self.buf_v = np.zeros((max(n_types, 1), cap))
         self.state = np.zeros((max(n_types, 1), 3))
         self.state[:, 2] = -np.inf
+        if watched is not None:  # unwatched types are never checked (module docstring)
+            self.state[:len(watched), 2] = np.where(np.asarray(watched, bool), -np.inf, np.inf)
         self.scratch = np.empty(cap)
 
     def push(self, tid: int, name: str, time: float, nnis: float) -> None:
@@ -110,6 +131,10 @@ class RunawayNis:
                            self.min_count, self.bound, self.scratch)
         if med >= 0.0:
             raise self.error(tid, name, time, med)
+
+    def restart(self) -> None:
+        """Empty the windows of all types (after a gate recovery)."""
+        runaway_restart(self.state)
 
     def error(self, tid: int, name: str, time: float, med: float) -> FilterHealthError:
         """The error for a runaway median ``med`` of type ``tid`` (``name``) at ``time``."""

@@ -415,8 +415,9 @@ def dense_segment(model, dynamics, t, dth, dv, pos, vel, C, pnom, i_sg, i_sa, gm
                     fail_t, fail_v, fail_tid = t[j], med, tid
                     break
             thr = thrs[mi]
-            gc = gating.gate_step(streak, tid, t[j], nis, thr, recovery)
+            gc = gating.gate_step(streak, tid, t[j], nis, thr, recovery[tid])
             if gc == gating.RECOVER:
+                health.runaway_restart(rw_state)
                 gating.inflate_for(P, Hk[o0:o1], Rk[o0:o1, o0:o1], zd, thr, n_nav)
                 _innovation_cov(Hk, P, Rk, m_tot, HP, S, n)  # the others see the inflated P
                 nis = gating.nis_into(S[o0:o1, o0:o1], zd, Ln, wn)

@@ -118,6 +118,12 @@ class Measurement:
     #: applied by the compiled high-rate path of the engine (models with :meth:`compiled`)
     high_rate = False
 
+    #: the gate recovery may force it in (:mod:`.gating`): only absolute measurements that can
+    #: re-anchor the state (GNSS position and velocity, control points, pseudoranges); never a
+    #: constraint that is only approximately true (NHC in a skidding turn, a ZUPT detected
+    #: while the vehicle creeps, an odometer on a slipping wheel)
+    recoverable = False
+
     def __init__(self, times, gate_probability: float | None = None, name: str | None = None):
         self.times = np.asarray(times, dtype=float).reshape(-1)
         if self.times.size and not np.all(np.isfinite(self.times)):
@@ -366,6 +372,7 @@ class GnssPosition(Measurement):
     """
 
     name = "gnss_pos"
+    recoverable = True
     STD_COLS = ("east_std", "north_std", "up_std")
 
     def __init__(self, data: pd.DataFrame, lever_arm=(0.0, 0.0, 0.0), std=None,
@@ -399,6 +406,7 @@ class GnssVelocity(Measurement):
     """
 
     name = "gnss_vel"
+    recoverable = True
     STD_COLS = ("vel_e_std", "vel_n_std", "vel_u_std")
 
     def __init__(self, data: pd.DataFrame, lever_arm=(0.0, 0.0, 0.0), std=None,
@@ -444,15 +452,20 @@ class Zupt(Measurement):
         weighted by the stillness statistic).
     high_rate : bool
         Apply it on the engine's compiled high-rate path (at the IMU sample nearest each time).
+    recoverable : bool
+        Let the gate recovery force it in (:attr:`Measurement.recoverable`): only where rest
+        is certain, as in the stance of a foot-mounted IMU; a vehicle's detected stillness
+        may be slow motion.
     """
 
     name = "zupt"
 
     def __init__(self, times, std=0.01, gate_probability: float | None = None,
-                 name: str | None = None, high_rate: bool = False):
+                 name: str | None = None, high_rate: bool = False, recoverable: bool = False):
         super().__init__(times, gate_probability, name)
         self.std = _per_epoch(std, self.times.size, 3, "Zupt")
         self.high_rate = bool(high_rate)
+        self.recoverable = bool(recoverable)
         self._spec = CompiledSpec(ZUPT, np.zeros(8, np.int64), np.zeros(8), self.std, self.std)
 
     def compiled(self, layout):
@@ -477,14 +490,17 @@ class Zaru(Measurement):
     high_rate : bool
         Apply it on the engine's compiled high-rate path (at the IMU sample nearest each time;
         the averaging window is then that IMU interval).
+    recoverable : bool
+        Let the gate recovery force it in (see :class:`Zupt`).
     """
 
     name = "zaru"
 
     def __init__(self, times, std=None, average: bool = True, min_std: float = 1e-7,
                  gate_probability: float | None = None, name: str | None = None,
-                 high_rate: bool = False):
+                 high_rate: bool = False, recoverable: bool = False):
         super().__init__(times, gate_probability, name)
+        self.recoverable = bool(recoverable)
         self.std = None if std is None else _vec3(std, "std")
         self.average = bool(average)
         self.min_std = float(min_std)
@@ -522,6 +538,7 @@ class Cupt(Measurement):
     """
 
     name = "cupt"
+    recoverable = True
 
     def __init__(self, times, lat, lon, height, std=0.01, lever_arm=(0.0, 0.0, 0.0),
                  gate_probability: float | None = None, name: str | None = None):
