@@ -654,6 +654,13 @@ SCHEMA: dict[str, Any] = {
                                       "forward acceleration (squat/dive) in the vertical NHC "
                                       "(strapdown process model)",
                                       when=_on("aiding.nhc")),
+        "nhc_lever_arm": _spec(list, [0.0, 0.0, 0.0], "IMU -> rear-axle centre (the point "
+                               "without lateral velocity), body RFU [m]", check=_vector(3),
+                               when=_on("aiding.nhc")),
+        "nhc_slip_gradient": _spec(_NUM, 0.01, "tyre slip angle per lateral acceleration "
+                                   "[rad/(m/s^2)]: the lateral NHC sigma grows to sqrt(std^2 + "
+                                   "(k |yaw rate| speed^2)^2) in turns (0: constant)",
+                                   check=NONNEGATIVE, when=_on("aiding.nhc")),
         "cupt": _spec(bool, False, "control-point updates (inputs.control_points)"),
         "odometer": _spec(bool, False, "odometer speed updates"),
         "odometer_std": _spec(_NUM, 0.1, "odometer speed sigma [m/s]", check=POSITIVE,

@@ -20,7 +20,7 @@ from filter_sim import (
 
 from insgnss.attitude import euler_to_dcm, rotvec_to_dcm
 from insgnss.earth import enu_displacement_to_geodetic, radii
-from insgnss.errors import InputFormatError
+from insgnss.errors import InputFormatError, InvalidValueError
 from insgnss.filter import (
     BodyVelocity,
     Cupt,
@@ -408,3 +408,27 @@ def test_nhc_pitch_compliance_estimated_and_removes_outage_drift():
             k_est, k_std = res.forward["kappa"].iloc[-1], res.forward["kappa_std"].iloc[-1]
             assert abs(k_est - kappa) < 3 * k_std and k_std < 0.15 * kappa, (k_est, k_std)
     assert ends["kappa"] < 0.6 * ends[None], ends
+def test_nhc_lateral_sigma_grows_with_yaw_rate_times_speed_squared():
+    """sigma_lat^2 = std^2 + (k |w_z| v^2)^2 with v the forward velocity of the point: 15 m/s
+    forward at 0.2 rad/s and k = 0.01 give 0.45 m/s of slip sigma; the vertical axis and a
+    straight run keep their sigma; the lever arm to the rear axle adds w x l (issue 22)."""
+    lay = StateLayout()
+    # heading 0, level: body forward = north
+    straight = _nav(lay, vel=(0.0, 15.0, 0.0), rpy=(0.0, 0.0, 0.0), omega=(0.0, 0.0, 0.0))
+    turning = _nav(lay, vel=(0.0, 15.0, 0.0), rpy=(0.0, 0.0, 0.0), omega=(0.0, 0.0, 0.2))
+    nhc = BodyVelocity([10.0], 0.0, axes=(0, 2), std=[0.1, 0.05], slip_gradient=0.01)
+    _, _, R = nhc.evaluate(0, straight)
+    assert np.sqrt(np.diag(R)) == pytest.approx([0.1, 0.05])
+    _, _, R = nhc.evaluate(0, turning)
+    assert np.sqrt(R[0, 0]) == pytest.approx(np.hypot(0.1, 0.01 * 0.2 * 15.0**2), rel=1e-12)
+    assert np.sqrt(R[1, 1]) == pytest.approx(0.05)
+    _, _, R0 = BodyVelocity([10.0], 0.0, axes=(0, 2), std=[0.1, 0.05]).evaluate(0, turning)
+    assert np.sqrt(R0[0, 0]) == pytest.approx(0.1)
+    # rear axle 1.5 m behind the IMU: turning left (w_z > 0) moves it to the right at 0.3 m/s
+    rear = BodyVelocity([10.0], 0.0, axes=(0, 2), std=0.1, lever_arm=(0.0, -1.5, 0.0))
+    z, _, _ = rear.evaluate(0, turning)
+    assert z[0] == pytest.approx(0.3, abs=1e-9)
+    _check_jacobian(BodyVelocity([10.0], 0.0, axes=(0, 2), std=0.1, slip_gradient=0.01,
+                                 lever_arm=(0.1, -1.5, -0.6)), _nav(lay))
+    with pytest.raises(InvalidValueError):
+        BodyVelocity([10.0], slip_gradient=-1.0)

@@ -462,6 +462,7 @@ def build_aiding(job: Job, inputs: Inputs, windows, imu: pd.DataFrame) -> Aiding
     if a["nhc"]:
         tn = t[0] + np.arange(1, int((t[-1] - t[0]) / a["nhc_interval"])) * a["nhc_interval"]
         m = BodyVelocity(tn, 0.0, axes=(0, 2), std=a["nhc_std"], name="nhc",
+                         lever_arm=a["nhc_lever_arm"], slip_gradient=a["nhc_slip_gradient"],
                          misalignment_state="nhc_misalignment" if a["nhc_misalignment"]
                          else None, pitch_compliance_state="nhc_pitch_compliance"
                          # a strapdown error state (RISS takes no extra states: not used there)
