@@ -659,7 +659,7 @@ SCHEMA: dict[str, Any] = {
                                when=_on("aiding.nhc")),
         "nhc_slip_gradient": _spec(_NUM, 0.01, "tyre slip angle per lateral acceleration "
                                    "[rad/(m/s^2)]: the lateral NHC sigma grows to sqrt(std^2 + "
-                                   "(k |yaw rate| speed^2)^2) in turns (0: constant)",
+                                   "(k yaw_rate speed^2)^2) in turns (0: constant)",
                                    check=NONNEGATIVE, when=_on("aiding.nhc")),
         "cupt": _spec(bool, False, "control-point updates (inputs.control_points)"),
         "odometer": _spec(bool, False, "odometer speed updates"),
