@@ -43,7 +43,8 @@ densities the filter needs. ``w`` and ``f`` are the samples as recorded
 (:func:`insgnss.detect.imu_rates`: rates as they are, increments divided by their interval),
 never the trapezoidal increments of the mechanization, whose averaging of neighbours would halve
 the variance of white noise. On a vehicle with the engine running this captures the
-vibration, which datasheet values do not.
+vibration, which datasheet values do not. Samples that end a bridged gap are left out
+(:func:`insgnss.detect.regular_samples`): their interval is not the nominal one.
 """
 
 from __future__ import annotations
@@ -51,7 +52,7 @@ from __future__ import annotations
 import numpy as np
 import pandas as pd
 
-from .detect import imu_rates
+from .detect import imu_rates, regular_samples
 from .earth import geodetic_to_enu
 from .errors import InvalidValueError
 from .imu import ImuErrorModel
@@ -209,11 +210,14 @@ def estimate_velocity_lag(gnss: pd.DataFrame, windows=(), *, steps: int = 50
 
 
 def static_noise(imu: pd.DataFrame) -> tuple[float, float]:
-    """White-noise densities (ARW [rad/sqrt(s)], VRW [m/s/sqrt(s)]) from a static window."""
+    """White-noise densities (ARW [rad/sqrt(s)], VRW [m/s/sqrt(s)]) from a static window
+    (regular samples only: module docstring)."""
     t, w, f = imu_rates(imu)
     if t.size < 20:
         raise InvalidValueError("static window too short for a noise estimate", found=t.size)
     dt = float(np.median(np.diff(t)))
+    ok = regular_samples(t)
+    w, f = w[ok], f[ok]
     return float(np.max(np.std(w, axis=0)) * np.sqrt(dt)), \
         float(np.max(np.std(f, axis=0)) * np.sqrt(dt))
 

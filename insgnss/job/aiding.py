@@ -120,26 +120,71 @@ class HorizontalGnssVelocity(GnssVelocity):
         return z[:2], H[:2], R[:2, :2]
 
 
-def stillness_times(job: Job, imu: pd.DataFrame) -> np.ndarray:
+#: the default stillness detector of a vehicle: acceleration moving variance over 0.5 s,
+#: below 0.1 m/s^2 (raised to the still noise a static window shows: :func:`still_threshold`)
+VEHICLE_DETECTOR = {"method": "amv", "window": 0.5, "threshold": 0.1, "min_stance": 1.0,
+                    "margin": 0.3}
+#: the default threshold sits this factor above the 99th percentile of the detector statistic
+#: over the static window (the still level with the engine running, plus a margin)
+STILL_MARGIN = 1.5
+
+
+def still_threshold(static: pd.DataFrame, limit: float) -> float:
+    """Threshold [m/s^2] of the default vehicle detector from the still noise measured in the
+    static window ``static``: ``STILL_MARGIN`` x the 99th percentile of its AMV statistic over
+    regular samples (windows touching a bridged sample left out), at least the default 0.1 and
+    at most ``limit`` (the stillness limit the static initialization accepted).
+
+    An idling engine shakes a parked car by 0.13-0.35 m/s^2: a fixed 0.1 would never detect
+    it still, while the static start accepted it (issue 22).
+    """
+    from ..detect import amv_statistic, imu_rates, regular_samples, sample_count
+
+    t, _, f = imu_rates(static)
+    base = float(VEHICLE_DETECTOR["threshold"])
+    if t.size < 3:
+        return base
+    w = sample_count(VEHICLE_DETECTOR["window"], float(np.median(np.diff(t))))
+    stat = amv_statistic(np.require(f, float, ["C", "W"]), w)
+    bad = ~regular_samples(t)
+    near = np.convolve(bad.astype(float), np.ones(w + 1), mode="same") > 0
+    if near.all():
+        return base
+    level = float(np.percentile(stat[~near], 99.0))
+    return float(min(max(base, STILL_MARGIN * level), max(base, limit)))
+
+
+def stillness_times(job: Job, imu: pd.DataFrame, static: pd.DataFrame | None = None
+                    ) -> tuple[np.ndarray, float | None]:
     """Times (at the ZUPT interval) when the IMU is still, from the detector and/or declared
-    static intervals."""
+    static intervals, and the threshold of the default detector (None when the job sets the
+    detector or only declares intervals). With the static window ``static`` of the
+    initialization the default threshold follows its still noise (:func:`still_threshold`)."""
     a = job["aiding"]
     t = imu.index.to_numpy(float)
     still = np.zeros(t.size, bool)
+    thr = None
     if a["detector"] or not a["static_intervals"]:
         from ..detect import DetectorConfig, detect_stillness
 
-        cfg = DetectorConfig.from_dict(a["detector"]) if a["detector"] else \
-            DetectorConfig(method="amv", window=0.5, threshold=0.1, min_stance=1.0, margin=0.3)
+        if a["detector"]:
+            cfg = DetectorConfig.from_dict(a["detector"])
+        else:
+            spec = dict(VEHICLE_DETECTOR)
+            if static is not None:
+                spec["threshold"] = still_threshold(
+                    static, job["initialization"]["static_max_accel_std"])
+            thr = float(spec["threshold"])
+            cfg = DetectorConfig(**spec)
         still |= detect_stillness(imu, cfg).still.to_numpy(bool)
     for a0, a1 in a["static_intervals"] or []:
         still |= (t >= a0) & (t <= a1)
     ts = t[still]
     if not ts.size:
-        return ts
+        return ts, thr
     step = a["zupt_interval"]
     keep = np.concatenate([[True], np.diff(np.floor((ts - ts[0]) / step)) > 0])
-    return ts[keep]
+    return ts[keep], thr
 
 
 @dataclass
@@ -212,6 +257,8 @@ class Aiding:
     """The aiding sources of a job and their measurement models."""
 
     sources: list[Source] = field(default_factory=list)
+    #: threshold of the default stillness detector [m/s^2] (None: not used)
+    still_threshold: float | None = None
 
     @property
     def models(self) -> list[Measurement]:
@@ -426,9 +473,12 @@ def _in_span(n_all: int, n_in: int, what: str, t0: float, t1: float, column: str
                  f"every one lies outside the IMU time span {t0:.3f} .. {t1:.3f} s", column)]
 
 
-def build_aiding(job: Job, inputs: Inputs, windows, imu: pd.DataFrame) -> Aiding:
+def build_aiding(job: Job, inputs: Inputs, windows, imu: pd.DataFrame,
+                 static: pd.DataFrame | None = None) -> Aiding:
     """The aiding sources of the job over the IMU table ``imu`` (the filter's span): GNSS with
-    the outage windows withheld, ZUPT, ZARU, NHC, CUPT, odometer."""
+    the outage windows withheld, ZUPT, ZARU, NHC, CUPT, odometer. ``static``: the static
+    window of the initialization (its still noise sets the default ZUPT detector threshold,
+    recorded in ``still_threshold``)."""
     a = job["aiding"]
     src = Aiding()
     t = imu.index.to_numpy(float)
@@ -438,7 +488,7 @@ def build_aiding(job: Job, inputs: Inputs, windows, imu: pd.DataFrame) -> Aiding
     elif inputs.gnss is not None:
         src.sources += _gnss_sources(job, inputs.gnss, inputs.lever_arm, windows, imu)
     if a["zupt"] or a["zaru"]:
-        ts = stillness_times(job, imu)
+        ts, src.still_threshold = stillness_times(job, imu, static)
         how = "the stillness detector ([aiding.detector])" if a["detector"] or \
             not a["static_intervals"] else "aiding.static_intervals"
         vmax = a["zupt_max_speed"]

@@ -111,7 +111,8 @@ def _strapdown_filter(ctx: RunContext, tuned: Tuned, smoother: bool = True):
     job, inputs, model = tuned.job, tuned.inputs, tuned.model
     init = initialize(job, inputs, model, tuned.windows)
     imu = inputs.imu.loc[init.state.time:]
-    aiding = build_aiding(job, inputs, tuned.windows, imu)
+    aiding = build_aiding(job, inputs, tuned.windows, imu, _static_window(inputs, init))
+    _record_still_threshold(ctx, aiding)
     aiding.require()
     cfg = filter_config(job, model, init)
     cfg.smoother = cfg.smoother and smoother
@@ -130,6 +131,18 @@ def _strapdown_filter(ctx: RunContext, tuned: Tuned, smoother: bool = True):
             compile_before_progress(imu, init.state, aiding.models, cfg)
         res = run_filter(imu, init.state, aiding.models, cfg, progress=ctx.progress and smoother)
     return res, init, aiding, imu
+
+
+def _static_window(inputs, init: Initialization):
+    """The IMU samples of the static initialization window (None without one)."""
+    if init.static_end is None:
+        return None
+    return inputs.imu.loc[init.state.time:init.static_end]
+
+
+def _record_still_threshold(ctx: RunContext, aiding) -> None:
+    if aiding.still_threshold is not None:
+        ctx.preprocessing["zupt_detector_threshold_m_s2"] = aiding.still_threshold
 
 
 def run_strapdown(ctx: RunContext) -> JobResult:
@@ -200,7 +213,8 @@ def run_riss(ctx: RunContext) -> JobResult:
     if float(imu.index[0]) != init.state.time:
         init.state = init.state.copy()
         init.state.time = float(imu.index[0])
-    aiding = build_aiding(job, inputs, ctx.windows, imu)
+    aiding = build_aiding(job, inputs, ctx.windows, imu, _static_window(inputs, init))
+    _record_still_threshold(ctx, aiding)
     aiding.require()
     cfg = filter_config(job, model, init)
     # aiding.odometer_std is the odometer speed noise; filter.scale_factors estimates the
