@@ -7,6 +7,11 @@ measures (``r_point = r_imu + C_b^l l^b``). Outage metrics follow the drive benc
 (shared/eval/README.md): per outage the horizontal error at its last reference epoch, the max
 and the RMS inside it, the vertical error at its end; outside the outages the horizontal RMS
 after a settling time, skipping a guard interval after each outage end.
+
+Consistency at the outage ends (when the solution carries ``east_std north_std``): the ratio of
+the horizontal error to the filter's horizontal sigma ``hypot(east_std, north_std)`` and the
+two-axis 3-sigma test ``(e_E/s_E)^2 + (e_N/s_N)^2 <= 11.83`` (chi-square, 2 dof, 99.73 %); the
+summary gives the ratio's mean/median/max and ``end_within_3sigma_fraction``.
 """
 
 from __future__ import annotations
@@ -98,6 +103,8 @@ def outage_metrics(errors: pd.DataFrame, windows, *, t_first: float | None = Non
     t = errors.index.to_numpy(float)
     hz = errors["horizontal"].to_numpy()
     up = errors["up"].to_numpy()
+    sig = errors[["east_std", "north_std"]].to_numpy(float) if \
+        {"east_std", "north_std"} <= set(errors.columns) else None
     k_of = window_index(t, windows)
     rows = []
     for k, (a, b) in enumerate(windows):
@@ -109,11 +116,14 @@ def outage_metrics(errors: pd.DataFrame, windows, *, t_first: float | None = Non
                          "end_v_err_m": np.nan, "complete": False})
             continue
         last = np.nonzero(valid)[0][-1]
-        rows.append({"outage": k, "start": a, "end": b, "n_epochs": int(valid.sum()),
-                     "end_h_err_m": float(hz[last]), "max_h_err_m": float(np.max(hz[valid])),
-                     "rms_h_err_m": float(np.sqrt(np.mean(hz[valid] ** 2))),
-                     "end_v_err_m": float(up[last]),
-                     "complete": bool(valid.sum() == m.sum())})
+        row = {"outage": k, "start": a, "end": b, "n_epochs": int(valid.sum()),
+               "end_h_err_m": float(hz[last]), "max_h_err_m": float(np.max(hz[valid])),
+               "rms_h_err_m": float(np.sqrt(np.mean(hz[valid] ** 2))),
+               "end_v_err_m": float(up[last]),
+               "complete": bool(valid.sum() == m.sum())}
+        if sig is not None:
+            row.update(_end_consistency(errors.iloc[last], sig[last]))
+        rows.append(row)
     table = pd.DataFrame(rows)
     t0 = t[0] if t_first is None else t_first
     outside = ~in_windows(t, windows) & (t >= t0 + settle_time) & np.isfinite(hz)
@@ -124,13 +134,37 @@ def outage_metrics(errors: pd.DataFrame, windows, *, t_first: float | None = Non
         "non_outage_rms_h_no_guard_m": _rms(hz[outside]),
         "non_outage_rms_v_m": _rms(up[guarded]),
     }
-    for col in ("end_h_err_m", "max_h_err_m", "rms_h_err_m"):
+    cols = ["end_h_err_m", "max_h_err_m", "rms_h_err_m"]
+    if "end_h_err_sigma_ratio" in table.columns:
+        cols.append("end_h_err_sigma_ratio")
+    for col in cols:
         v = table[col].to_numpy(float) if len(table) else np.array([])
         v = v[np.isfinite(v)]
         summary[f"{col}_mean"] = float(np.mean(v)) if v.size else float("nan")
         summary[f"{col}_median"] = float(np.median(v)) if v.size else float("nan")
         summary[f"{col}_max"] = float(np.max(v)) if v.size else float("nan")
+    if "end_within_3sigma" in table.columns:
+        w = table["end_within_3sigma"].dropna()
+        summary["end_within_3sigma_fraction"] = float(w.astype(float).mean()) if len(w) \
+            else float("nan")
     return table, summary
+
+
+#: 2-dof chi-square point of the 3-sigma probability (99.73 %): the horizontal "3 sigma" test
+CHI2_2DOF_3SIGMA = 11.829
+
+
+def _end_consistency(err: pd.Series, sig: np.ndarray) -> dict:
+    """Filter consistency at an outage end: the horizontal sigma ``hypot(east_std,
+    north_std)``, the ratio of the error to it (about 1 for an honest filter, RMS over
+    outages) and the 3-sigma test ``(e_E / s_E)^2 + (e_N / s_N)^2 <= chi2_2(99.73 %)`` (the
+    two-axis form of "within 3 sigma"; the stds' correlation is not in the output tables)."""
+    s_h = float(np.hypot(sig[0], sig[1]))
+    ok = bool(np.all(np.isfinite(sig)) and np.all(sig > 0))
+    d2 = float((err["east"] / sig[0]) ** 2 + (err["north"] / sig[1]) ** 2) if ok else np.nan
+    return {"end_h_sigma_m": s_h,
+            "end_h_err_sigma_ratio": float(err["horizontal"]) / s_h if s_h > 0 else np.nan,
+            "end_within_3sigma": (d2 <= CHI2_2DOF_3SIGMA) if np.isfinite(d2) else None}
 
 
 def _rms(x) -> float:

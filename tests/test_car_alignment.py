@@ -48,3 +48,44 @@ def test_tactical_mems_car_levels_and_takes_the_gnss_course(filter_grade, why):
     assert out.filter.complete and out.failure is None
     # gyrocompassing with ~100 deg/h of turn-on bias would be off by tens of degrees
     assert _heading_error_deg(out, inputs) < 3.0
+
+
+def test_idle_vibration_only_while_parked():
+    """[imu] idle_vibration_*: white noise of the given std on the still samples only; the
+    IMU errors of the moving samples are those of the run without it (own seed stream)."""
+    from insgnss.simulate.scenario import simulate_scenario
+
+    base = tomllib.loads(small_job_text())
+    vib = tomllib.loads(small_job_text(imu="idle_vibration_accel_std = 0.2\n"
+                                           "idle_vibration_gyro_std_deg_s = 0.3"))
+    a, b = simulate_scenario(base, seed=3), simulate_scenario(vib, seed=3)
+    still = a.truth["stationary"].reindex(a.imu.index, method="nearest").to_numpy() > 0.5
+    dt = 0.01
+    dv = (b.imu[["dv_x", "dv_y", "dv_z"]] - a.imu[["dv_x", "dv_y", "dv_z"]]).to_numpy() / dt
+    dw = (b.imu[["dtheta_x", "dtheta_y", "dtheta_z"]]
+          - a.imu[["dtheta_x", "dtheta_y", "dtheta_z"]]).to_numpy() / dt
+    assert still.sum() > 1000 and np.all(dv[~still] == 0) and np.all(dw[~still] == 0)
+    assert np.std(dv[still][1:]) == pytest.approx(0.2, rel=0.05)
+    assert np.degrees(np.std(dw[still][1:])) == pytest.approx(0.3, rel=0.05)
+
+
+def test_tactical_mems_car_scenario_runs_to_the_end():
+    """scenarios/mc_car_tactical_mems.toml (the Monte Carlo of issue 22, one run): the job from
+    the docs with the default static start completes, levels and takes the GNSS course, no NHC
+    is force-applied, and the summary reports the end-of-outage error against sigma."""
+    from pathlib import Path
+
+    from insgnss.config import load_job
+
+    path = Path(__file__).resolve().parents[1] / "scenarios" / "mc_car_tactical_mems.toml"
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        out = run_job(load_job(path), progress=False, seed=1)
+    assert out.filter.complete and out.failure is None
+    assert out.summary["initialization"]["heading_source"] == "gnss_course"
+    inn = out.filter.innovations
+    assert not inn.loc[inn.type == "nhc", "recovered"].any()
+    ev = out.evaluation["forward"]["summary"]
+    assert ev["n_outages"] == 7
+    assert 0.0 < ev["end_h_err_sigma_ratio_mean"] < 3.0
+    assert "zupt_detector_threshold_m_s2" in out.summary["preprocessing"]

@@ -67,3 +67,22 @@ def test_outage_metrics():
     assert table["max_h_err_m"].iloc[0] == pytest.approx(14.75 * 0.1)
     assert summary["non_outage_rms_h_m"] == pytest.approx(0.02)
     assert summary["n_outages"] == 1 and table["complete"].iloc[0]
+
+
+def test_outage_end_consistency_against_the_filter_sigma():
+    """Ratio |e_h| / hypot(s_E, s_N) and the two-axis 3-sigma test (chi2 2 dof 99.73 % =
+    11.83) at the last epoch of each outage (issue 22)."""
+    t = np.arange(0, 100.0, 0.25)
+    err = pd.DataFrame({"east": 0 * t, "north": 0 * t, "up": 0 * t, "horizontal": 0 * t},
+                       index=t)
+    err["east_std"], err["north_std"] = 0.6, 0.8
+    end = [40.0 + 14.75, 70.0 + 14.75]
+    err.loc[end[0], ["east", "north"]] = (1.8, 2.4)   # 3 sigma on each axis: d2 = 18 > 11.83
+    err.loc[end[1], ["east", "north"]] = (0.6, 0.8)   # 1 sigma on each axis: d2 = 2
+    err["horizontal"] = np.hypot(err["east"], err["north"])
+    table, summary = outage_metrics(err, [(40.0, 55.0), (70.0, 85.0)])
+    assert table["end_h_sigma_m"].to_numpy() == pytest.approx([1.0, 1.0])
+    assert table["end_h_err_sigma_ratio"].to_numpy() == pytest.approx([3.0, 1.0])
+    assert list(table["end_within_3sigma"]) == [False, True]
+    assert summary["end_within_3sigma_fraction"] == pytest.approx(0.5)
+    assert summary["end_h_err_sigma_ratio_max"] == pytest.approx(3.0)

@@ -316,7 +316,8 @@ def _initialize(job: Job, inputs: Inputs, model: ImuErrorModel, windows) -> Init
                  "heading comes from the GNSS course once faster than initialization.min_speed",
                  file=job.path, column="initialization.method", expected="a gyrocompass heading "
                  f"1-sigma <= {np.degrees(GYROCOMPASS_MAX_BIAS_RATIO):.3g} deg",
-                 found=f"{np.degrees(compass.heading_std):.3g} deg")
+                 found=f"{np.degrees(compass.heading_std):.3g} deg" if
+                 compass.heading_std < np.pi else "over 180 deg (no heading information)")
     t_end = res.time
     hdg = res.heading
     if job["filter"]["levelling_correlation"]:

@@ -34,7 +34,15 @@ import pandas as pd
 from .._version import __version__
 from ..earth import GRAVITY_MODELS
 from ..errors import ConfigError
-from ..imu import ImuErrorModel, grade
+from ..imu import (
+    ACCEL_COLS,
+    DTHETA_COLS,
+    DV_COLS,
+    GYRO_COLS,
+    ImuErrorModel,
+    grade,
+    is_increment_table,
+)
 from ..io.native import atomic_write_text, jsonable, write_table
 from ..mechanization.inverse import inverse_mechanize
 from ..mechanization.strapdown import NAV_COLS
@@ -51,7 +59,7 @@ SCENARIO_KEYS = {"name", "description", "seed", "imu_rate", "duration", "start_t
 TRAJECTORY_KEYS = {"vehicle", "lat", "lon", "height", "heading", "speed", "roll_gain",
                    "segments", "waypoints", "start_at_rest", "end_at_rest"}
 IMU_KEYS_EXTRA = {"grade", "bias_instability_model", "flicker_band", "flicker_per_decade",
-                  "output"}
+                  "output", "idle_vibration_accel_std", "idle_vibration_gyro_std_deg_s"}
 GNSS_KEYS = {"rate", "horizontal_std", "vertical_std", "correlation_time", "velocity",
              "velocity_std", "vertical_velocity_std", "lever_arm", "outages", "periodic_outages",
              "degraded", "outlier_probability", "outlier_duration", "outlier_magnitude", "q", "ns"}
@@ -225,7 +233,38 @@ def _imu_model(tab: _Table) -> tuple[ImuErrorModel, dict]:
         if not 0 < band[0] < band[1]:
             raise tab.err("flicker_band", "must be [low, high] with 0 < low < high", found=band)
         opts["flicker_band"] = tuple(band)
+    vib = (tab.num("idle_vibration_accel_std", nonneg=True) if "idle_vibration_accel_std" in tab
+           else 0.0,
+           np.radians(tab.num("idle_vibration_gyro_std_deg_s", nonneg=True))
+           if "idle_vibration_gyro_std_deg_s" in tab else 0.0)
+    if any(vib):
+        opts["idle_vibration"] = vib
     return model, opts
+
+
+def add_idle_vibration(imu: pd.DataFrame, still: np.ndarray, accel_std: float,
+                       gyro_std: float, rng: np.random.Generator) -> pd.DataFrame:
+    """Engine vibration of a parked vehicle: white specific force (``accel_std`` [m/s^2] per
+    axis and sample) and angular rate (``gyro_std`` [rad/s]) added to the increments of the
+    samples where the vehicle is ``still`` (an idling engine shakes a parked car by 0.1-0.4
+    m/s^2; the IMU errors while moving are the model's alone)."""
+    out = imu.copy()
+    t = out.index.to_numpy(float)
+    dt = np.empty(t.size)
+    dt[1:] = np.diff(t)
+    dt[0] = dt[1] if t.size > 1 else 0.0
+    k = np.flatnonzero(still)
+    noise = rng.standard_normal((k.size, 6)) * dt[k, None]
+    cols = DTHETA_COLS + DV_COLS
+    if not is_increment_table(out):
+        cols = GYRO_COLS + ACCEL_COLS
+        noise = noise / dt[k, None]
+    vals = out[cols].to_numpy(float, copy=True)
+    vals[k, :3] += noise[:, :3] * gyro_std
+    vals[k, 3:] += noise[:, 3:] * accel_std
+    out[cols] = vals
+    out.attrs = dict(imu.attrs)
+    return out
 
 
 def _gnss_kwargs(tab: _Table) -> dict:
@@ -500,8 +539,13 @@ def simulate_scenario(source: str | os.PathLike | dict, seed: int | None = None,
     model = None
     if "imu" in cfg:
         model, opts = _imu_model(_Table(cfg["imu"], "imu", file, None))
+        vib = opts.pop("idle_vibration", None)
         errs = simulate_imu(ideal, model, streams["imu"], **opts)
         imu, imu_bias = errs.imu, errs.bias
+        if vib is not None:  # its own child stream: the other errors stay as without it
+            still = truth["stationary"].reindex(imu.index, method="nearest").to_numpy() > 0.5
+            imu = add_idle_vibration(imu, still, *vib, streams["imu"].spawn(1)[0])
+            errs.settings["idle_vibration"] = {"accel_std": vib[0], "gyro_std": vib[1]}
         meta["imu"] = {"grade": model.name, "model_si": model.to_dict(),
                        "settings": errs.settings, "drawn": errs.params_as_lists()}
     else:
