@@ -636,6 +636,10 @@ SCHEMA: dict[str, Any] = {
                                           "aiding.detector is given, for insgnss compare)",
                                           lambda s, sim: s["aiding"]["zupt"] or
                                           s["aiding"]["zaru"] or bool(s["aiding"]["detector"]))),
+        "zupt_threshold_from_static": _spec(bool, False, "default detector (no "
+                                            "aiding.detector): threshold from the still noise "
+                                            "of the static start window (docs/zupt.md)",
+                                            when=_on("aiding.zupt", "aiding.zaru")),
         "detector": _spec(dict, {}, "stillness detector settings (docs/zupt.md; also used by "
                           "insgnss compare)",
                           check=_via("DetectorConfig fields", _check_detector)),

@@ -124,14 +124,15 @@ class HorizontalGnssVelocity(GnssVelocity):
 #: below 0.1 m/s^2 (raised to the still noise a static window shows: :func:`still_threshold`)
 VEHICLE_DETECTOR = {"method": "amv", "window": 0.5, "threshold": 0.1, "min_stance": 1.0,
                     "margin": 0.3}
-#: the default threshold sits this factor above the 99th percentile of the detector statistic
-#: over the static window (the still level with the engine running, plus a margin)
-STILL_MARGIN = 1.5
+#: the default threshold sits this factor above the median of the detector statistic over the
+#: static window (the still level with the engine running; the median, not a high percentile:
+#: a door shut or a passenger moving in the parked car is no still noise)
+STILL_MARGIN = 2.0
 
 
 def still_threshold(static: pd.DataFrame, limit: float) -> float:
     """Threshold [m/s^2] of the default vehicle detector from the still noise measured in the
-    static window ``static``: ``STILL_MARGIN`` x the 99th percentile of its AMV statistic over
+    static window ``static``: ``STILL_MARGIN`` x the median of its AMV statistic over
     regular samples (windows touching a bridged sample left out), at least the default 0.1 and
     at most ``limit`` (the stillness limit the static initialization accepted).
 
@@ -150,7 +151,7 @@ def still_threshold(static: pd.DataFrame, limit: float) -> float:
     near = np.convolve(bad.astype(float), np.ones(w + 1), mode="same") > 0
     if near.all():
         return base
-    level = float(np.percentile(stat[~near], 99.0))
+    level = float(np.median(stat[~near]))
     return float(min(max(base, STILL_MARGIN * level), max(base, limit)))
 
 
@@ -159,7 +160,8 @@ def stillness_times(job: Job, imu: pd.DataFrame, static: pd.DataFrame | None = N
     """Times (at the ZUPT interval) when the IMU is still, from the detector and/or declared
     static intervals, and the threshold of the default detector (None when the job sets the
     detector or only declares intervals). With the static window ``static`` of the
-    initialization the default threshold follows its still noise (:func:`still_threshold`)."""
+    initialization and ``aiding.zupt_threshold_from_static`` the default threshold follows
+    its still noise (:func:`still_threshold`)."""
     a = job["aiding"]
     t = imu.index.to_numpy(float)
     still = np.zeros(t.size, bool)
@@ -171,7 +173,7 @@ def stillness_times(job: Job, imu: pd.DataFrame, static: pd.DataFrame | None = N
             cfg = DetectorConfig.from_dict(a["detector"])
         else:
             spec = dict(VEHICLE_DETECTOR)
-            if static is not None:
+            if static is not None and a["zupt_threshold_from_static"]:
                 spec["threshold"] = still_threshold(
                     static, job["initialization"]["static_max_accel_std"])
             thr = float(spec["threshold"])
