@@ -661,9 +661,10 @@ SCHEMA: dict[str, Any] = {
         "nhc_lever_arm": _spec(list, [0.0, 0.0, 0.0], "IMU -> rear-axle centre (the point "
                                "without lateral velocity), body RFU [m]", check=_vector(3),
                                when=_on("aiding.nhc")),
-        "nhc_slip_gradient": _spec(_NUM, 0.01, "tyre slip angle per lateral acceleration "
-                                   "[rad/(m/s^2)]: the lateral NHC sigma grows to sqrt(std^2 + "
-                                   "(k yaw_rate speed^2)^2) in turns (0: constant)",
+        "nhc_slip_gradient": _spec(_NUM, 0.0, "tyre slip angle per lateral acceleration "
+                                   "[rad/(m/s^2)], about 0.01 for a passenger car: the lateral "
+                                   "NHC sigma grows to sqrt(std^2 + (k yaw_rate speed^2)^2) in "
+                                   "turns (0: constant)",
                                    check=NONNEGATIVE, when=_on("aiding.nhc")),
         "cupt": _spec(bool, False, "control-point updates (inputs.control_points)"),
         "odometer": _spec(bool, False, "odometer speed updates"),
