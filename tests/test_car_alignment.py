@@ -88,4 +88,3 @@ def test_tactical_mems_car_scenario_runs_to_the_end():
     ev = out.evaluation["forward"]["summary"]
     assert ev["n_outages"] == 7
     assert 0.0 < ev["end_h_err_sigma_ratio_mean"] < 3.0
-    assert "zupt_detector_threshold_m_s2" in out.summary["preprocessing"]
