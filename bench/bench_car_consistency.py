@@ -1,4 +1,4 @@
-"""Monte Carlo of issue 22: the tactical-MEMS car (scenarios/mc_car_tactical_mems.toml) processed
+"""Monte Carlo of the tactical-MEMS car (scenarios/mc_car_tactical_mems.toml) processed
 by the job the docs describe for a car, N runs with independent seeds.
 
 Prints per run whether it completed, the heading source of the static start, the gate-recovery

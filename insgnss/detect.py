@@ -630,7 +630,7 @@ def regular_samples(t: np.ndarray, tolerance: float = 0.5) -> np.ndarray:
     missing sample holds the increment of one interval divided here by two (``g / 2`` of
     apparent specific-force error), and a rate sample after a gap is not the neighbour of the
     one before it. One such sample in a 25 s static window raised the measured VRW from 0.042
-    to 0.54 m/s/sqrt(h) (issue 22): noise estimates and thresholds taken from still windows
+    to 0.54 m/s/sqrt(h): noise estimates and thresholds taken from still windows
     use only regular samples.
     """
     t = np.asarray(t, float)

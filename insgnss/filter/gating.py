@@ -26,7 +26,7 @@ control points, pseudoranges and Doppler): after an outage, a wrong covariance i
 such a fix. A constraint that is only approximately true - the non-holonomic constraint in a
 skidding turn, a ZUPT on a vehicle that creeps, an odometer on a slipping wheel - is never forced
 in: its persistent rejection means the constraint is violated, and inflating ``P`` to accept
-it turns the attitude to fit a wrong measurement (issue 22: 16 deg of heading in 2.5 s). The
+it turns the attitude to fit a wrong measurement (seen on a real car log: 16 deg of heading in 2.5 s). The
 engine passes ``recovery = -1`` (never) for those types. After a recovery the runaway-NIS
 windows restart (:mod:`.health`).
 

@@ -137,7 +137,7 @@ def still_threshold(static: pd.DataFrame, limit: float) -> float:
     at most ``limit`` (the stillness limit the static initialization accepted).
 
     An idling engine shakes a parked car by 0.13-0.35 m/s^2: a fixed 0.1 would never detect
-    it still, while the static start accepted it (issue 22).
+    it still, while the static start accepted it.
     """
     from ..detect import amv_statistic, imu_rates, regular_samples, sample_count
 
