@@ -237,14 +237,22 @@ class StrapdownModel(ProcessModelBase):
         pos, rates = self.pos, self.rates
         nav.time = time
         nav.lat, nav.lon, nav.height = pos[0], pos[1], pos[2]
-        nav.vel, nav.C = self.vel, self.C
+        nav.vel, nav.C = self._nominal_velocity_attitude()
         nav.omega_ib, nav.omega_ib_mean = rates[0], rates[1]
         nav.f_ib, nav.f_ib_mean = rates[2], rates[3]
         nav.segment_duration = self.seg_dur
         nav.params = self.pnom
         nav.M, nav.N = earth.radii(pos[0])
+        self._complete_nominal(nav)
         self._nav_time = time
         return nav
+
+    def _nominal_velocity_attitude(self) -> tuple[np.ndarray, np.ndarray]:
+        """ENU velocity and body-to-ENU DCM of the nominal state (views)."""
+        return self.vel, self.C
+
+    def _complete_nominal(self, nav: NominalState) -> None:
+        """Fields a derived frame adds to the nominal state (none for the LLF)."""
 
     def feedback(self, x: np.ndarray) -> None:
         kernels.apply_feedback(self.pos, self.vel, self.C, self.pnom, x)

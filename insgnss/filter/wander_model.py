@@ -192,25 +192,13 @@ class WanderModel(StrapdownModel):
     def nominal_finite(self) -> bool:
         return bool(np.isfinite(self.Cne.sum() + self.hv[0] + self.vel.sum() + self.C.sum()))
 
-    def nominal(self, time: float) -> WanderNominalState:
-        nav = self._nav
-        if self._nav_time == time:
-            return nav
-        pos, rates = self.pos, self.rates
-        nav.time = time
-        nav.lat, nav.lon, nav.height = pos[0], pos[1], pos[2]
-        b = self._buf
-        nav.vel = b[3:6].copy()
-        nav.C = self._nav_enu_C()
-        nav.omega_ib, nav.omega_ib_mean = rates[0], rates[1]
-        nav.f_ib, nav.f_ib_mean = rates[2], rates[3]
-        nav.segment_duration = self.seg_dur
-        nav.params = self.pnom
-        nav.M, nav.N = earth.radii(pos[0])
+    def _nominal_velocity_attitude(self) -> tuple[np.ndarray, np.ndarray]:
+        return self._buf[3:6].copy(), self._nav_enu_C()
+
+    def _complete_nominal(self, nav: WanderNominalState) -> None:
+        pos = self.pos
         nav.r_e = ecef_position(self.Cne, self.hv[0])
         nav.Cel = self._enu_transform(pos[0], pos[1])
-        self._nav_time = time
-        return nav
 
     def observe(self, m, z, H, R):
         """``H`` of the LLF error state mapped onto the ECEF errors (``H T``)."""
