@@ -29,11 +29,15 @@ real tracks (end height and the RMS ZUPT innovation at stance entry).
 ``--only level_floor``: the default table without and with ``[foot] level_floor``
 (:class:`insgnss.filter.height_aiding.LevelFloor` and the per-stride height noise, docs/zupt.md
 section 7).
+``--only phases``: where in the stride the height error of the forward filter accrues on the
+PyShoe trials (Vicon; the marker's offset from the IMU fitted per trial): from stance release
+to the heel strike, from the heel strike to the detected stance, and over the stance; with the
+spread of the stance-to-stance height changes (what ``level_floor_max_step`` has to pass).
 
 Usage::
 
     PYTHONPATH=. python bench/bench_foot_height.py [--config job.toml] [--forward] [--json]
-                                                  [--only xio|ucr|pyshoe|sim|sensor|level_floor]
+                                                  [--only xio|ucr|pyshoe|sim|sensor|level_floor|phases]
 """
 
 from __future__ import annotations
@@ -72,8 +76,10 @@ def stance_length(res) -> float:
 
 def _common(res, sol) -> dict:
     fwd = res.forward[["east", "north"]].to_numpy()
+    lf = res.height_aiding.get("level_floor", {})
     return {"up_end": float(sol["up"].iloc[-1]), "length_raw": path_length(fwd),
-            "length_stance": stance_length(res)}
+            "length_stance": stance_length(res), "floor_applied": lf.get("applied", 0),
+            "floor_skipped": lf.get("skipped", 0)}
 
 
 def run_xio(cfg: FootConfig, forward: bool) -> list[dict]:
@@ -270,12 +276,13 @@ def print_level_floor(rows: list[dict]) -> None:
     off = {r["track"]: r for r in rows if not r["level_floor"]}
     print("foot INS without / with [foot] level_floor:")
     print(f"{'track':30s} {'metric':13s} {'horiz off':>9s} {'horiz on':>9s} {'dh off':>7s} "
-          f"{'dh on':>7s}")
+          f"{'dh on':>7s} {'floor applied/skipped':>21s}")
     for r in rows:
         if r["level_floor"]:
             o = off[r["track"]]
             print(f"{r['track']:30s} {r['metric']:13s} {o['horizontal']:9.3f} "
-                  f"{r['horizontal']:9.3f} {o['height_err']:+7.3f} {r['height_err']:+7.3f}")
+                  f"{r['horizontal']:9.3f} {o['height_err']:+7.3f} {r['height_err']:+7.3f} "
+                  f"{r['floor_applied']:14d}/{r['floor_skipped']}")
     for lf in (False, True):
         ps = [r for r in rows if r["track"].startswith("pyshoe") and r["level_floor"] == lf]
         if ps:
@@ -428,6 +435,85 @@ def print_sensor(sim: list[dict], real: list[dict]) -> None:
               f"J {r['J_mm_s']:6.1f}")
 
 
+# --- where in the stride the height error accrues (PyShoe, Vicon) ----------------------------
+HEEL_STRIKE_SEARCH = 0.3  # s before the detected stance: the heel strike is the |f| peak there
+
+
+def _runs(still: np.ndarray) -> list[tuple[int, int]]:
+    """Still runs as (first, one past last) sample indices."""
+    d = np.diff(np.r_[0, still.astype(np.int8), 0])
+    return list(zip(np.flatnonzero(d == 1), np.flatnonzero(d == -1), strict=True))
+
+
+def stride_phases(res, imu, truth_z: np.ndarray) -> dict:
+    """Height error of the forward solution split by gait phase [m per stride].
+
+    The Vicon marker sits at an unknown body offset ``r`` from the IMU, so its height differs
+    from the IMU's by ``[C r]_up``; ``r`` is fitted by least squares over the swings
+    (``z_vicon - up_ins = [C(t) r]_up + const`` per swing, three unknowns for the trial) and
+    the truth of the IMU point is ``z_vicon - [C r]_up``. Phases of a stride: stance release
+    -> heel strike (the peak of ``|f|`` in the last 0.3 s before the next stance) -> first
+    sample of the next stance -> release.
+    """
+    from insgnss.attitude import euler_to_dcm
+
+    sol = res.forward
+    t = sol.index.to_numpy()
+    up = sol["up"].to_numpy()
+    up_row = np.array([euler_to_dcm(r, p, h)[2] for r, p, h in
+                       sol[["roll", "pitch", "heading"]].to_numpy()])
+    runs = _runs(res.stillness.still.to_numpy(bool))
+    swings = [(b0 - 1, a1) for (_, b0), (a1, _) in zip(runs[:-1], runs[1:], strict=True)
+              if t[a1] - t[b0 - 1] > 0.25]  # detector splits inside one stance are no swing
+    A = np.concatenate([up_row[a:b + 1] - up_row[a] for a, b in swings])
+    y = np.concatenate([(truth_z[a:b + 1] - truth_z[a]) - (up[a:b + 1] - up[a])
+                        for a, b in swings])
+    r = np.linalg.lstsq(A, y, rcond=None)[0]
+    err = up - (truth_z - up_row @ r)
+    fn = np.linalg.norm(imu[["accel_x", "accel_y", "accel_z"]].to_numpy(), axis=1)
+    dt = float(np.median(np.diff(t)))
+    rows = []
+    for (a, b), (a2, _) in zip(swings[:-1], swings[1:], strict=True):
+        lo = max(a, b - int(round(HEEL_STRIKE_SEARCH / dt)))
+        hs = lo + int(np.argmax(fn[lo:b + 1]))
+        rows.append((err[hs] - err[a], err[b] - err[hs], err[a2] - err[b], t[b] - t[hs]))
+    p = np.array(rows)
+    dh = np.array([up[a1] - up[b0 - 1] for (_, b0), (a1, _) in zip(runs[:-1], runs[1:], strict=True)
+                   if t[a1] - t[b0 - 1] > 0.25])
+    return {"marker_offset_m": r.round(4).tolist(), "strides": len(p),
+            "swing_to_heel_strike": float(p[:, 0].mean()),
+            "heel_strike_to_stance": float(p[:, 1].mean()),
+            "stance": float(p[:, 2].mean()), "loading_s": float(p[:, 3].mean()),
+            "stride_dh_median_abs": float(np.median(np.abs(dh))),
+            "stride_dh_max_abs": float(np.abs(dh).max()),
+            "stride_dh_over_5cm": int(np.sum(np.abs(dh) > 0.05)),
+            "stride_dh_over_10cm": int(np.sum(np.abs(dh) > 0.10))}
+
+
+def run_phases(cfg: FootConfig) -> list[dict]:
+    lat, lon, h = SITES["pyshoe"]
+    out = []
+    for mat in sorted((DATA / "pyshoe-vicon").glob("2017-11-2[27]-*.mat")):
+        imu, truth = convert.to_insgnss(mat)
+        res = run_foot_ins(imu, cfg, lat=lat, lon=lon, height=h)
+        tz = truth["z"].to_numpy() - truth["z"].iloc[0]
+        out.append({"track": mat.stem, "height_err": float(res.forward["up"].iloc[-1] - tz[-1]),
+                    **stride_phases(res, imu, tz)})
+    return out
+
+
+def print_phases(rows: list[dict]) -> None:
+    print("forward filter, height error per stride [mm]; stance-to-stance dh of the INS")
+    print(f"{'trial':22s} {'dh end':>7s} {'n':>3s} {'rel->HS':>8s} {'HS->st':>7s} {'stance':>7s} "
+          f"{'load ms':>7s} {'|dh| med':>8s} {'max':>6s} {'>5cm':>5s} {'>10cm':>5s}")
+    for r in rows:
+        print(f"{r['track']:22s} {r['height_err']:+7.3f} {r['strides']:3d} "
+              f"{1e3 * r['swing_to_heel_strike']:+8.1f} {1e3 * r['heel_strike_to_stance']:+7.1f} "
+              f"{1e3 * r['stance']:+7.1f} {1e3 * r['loading_s']:7.0f} "
+              f"{1e3 * r['stride_dh_median_abs']:8.1f} {1e3 * r['stride_dh_max_abs']:6.0f} "
+              f"{r['stride_dh_over_5cm']:5d} {r['stride_dh_over_10cm']:5d}")
+
+
 def run_all(cfg: FootConfig, forward: bool = False) -> list[dict]:
     return run_xio(cfg, forward) + run_ucr(cfg, forward) + run_pyshoe(cfg, forward)
 
@@ -451,7 +537,8 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--config", type=Path, default=None, help="TOML with a [foot] table")
     p.add_argument("--forward", action="store_true", help="the causal filter, not smoothed")
     p.add_argument("--json", action="store_true")
-    p.add_argument("--only", choices=["xio", "ucr", "pyshoe", "sim", "level_floor", "sensor"],
+    p.add_argument("--only", choices=["xio", "ucr", "pyshoe", "sim", "level_floor", "sensor",
+                                      "phases"],
                    default=None)
     a = p.parse_args(argv)
     cfg = load_config(a.config)
@@ -466,6 +553,10 @@ def main(argv: list[str] | None = None) -> int:
     if a.only == "sim":
         rows = sim_effects(cfg)
         print(json.dumps(rows, indent=1)) if a.json else print_sim(rows)
+        return 0
+    if a.only == "phases":
+        rows = run_phases(cfg)
+        print(json.dumps(rows, indent=1)) if a.json else print_phases(rows)
         return 0
     if a.only == "level_floor":
         rows = run_level_floor(cfg, a.forward)

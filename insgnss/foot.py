@@ -180,11 +180,13 @@ class FootConfig:
         Normal-gravity model of the nominal mechanization.
     level_floor : bool
         Consecutive stances at the same height (:class:`~.filter.height_aiding.LevelFloor`)
-        for walks known to stay on one floor (off by default: stairs and ramps are skipped only
-        beyond ``level_floor_max_step``).
-    level_floor_std, level_floor_max_step : float
+        for walks known to stay on one floor (off by default: a stair step, a change above
+        ``level_floor_max_step`` and steeper than ``level_floor_max_slope``, is skipped).
+    level_floor_std, level_floor_max_step, level_floor_max_slope : float
         Floor flatness plus stance repeatability [m]; the height change between two stances
-        above which no constraint is applied [m].
+        below which the constraint always applies [m]; the change per metre of horizontal
+        stance-to-stance distance below which it also applies (stairs rise 0.36-0.8 per
+        metre, the foot INS's own error on a running stride reaches 0.15).
     baro : bool
         Use a ``pressure`` [Pa] or ``baro_height`` [m] column of the IMU table when present
         (:class:`~.filter.height_aiding.BaroHeight`).
@@ -231,6 +233,7 @@ class FootConfig:
     level_floor: bool = False
     level_floor_std: float = 0.002
     level_floor_max_step: float = 0.05
+    level_floor_max_slope: float = 0.2
     baro: bool = True
     baro_std: float = 0.2
     baro_interval: float = 0.5
@@ -260,6 +263,7 @@ class FootConfig:
                 raise ConfigError("must be true or false", column=name, expected="boolean",
                                   found=repr(getattr(self, name)))
         for name, low in (("level_floor_std", 0.0), ("level_floor_max_step", 0.0),
+                          ("level_floor_max_slope", None),
                           ("baro_std", 0.0), ("baro_interval", None),
                           ("baro_offset_psd", None), ("stride_height_noise", None)):
             v = getattr(self, name)
@@ -464,7 +468,8 @@ def height_aiding(t, still, cfg: FootConfig, baro: pd.DataFrame | None = None,
     runs = still_runs(still)
     if cfg.level_floor and len(runs) > 1:
         meas.append(LevelFloor([(t[a], t[b - 1]) for a, b in runs], std=cfg.level_floor_std,
-                               max_step=cfg.level_floor_max_step))
+                               max_step=cfg.level_floor_max_step,
+                               max_slope=cfg.level_floor_max_slope))
     if cfg.baro and baro is not None and len(baro):
         meas.append(BaroHeight(baro, std=cfg.baro_std, interval=cfg.baro_interval,
                                offset_psd=cfg.baro_offset_psd))

@@ -14,7 +14,7 @@ from insgnss.errors import InputFormatError, InvalidValueError
 from insgnss.filter import run_filter
 from insgnss.filter.engine import FilterConfig
 from insgnss.filter.height_aiding import BaroHeight, LevelFloor
-from insgnss.filter.measurements import Zupt
+from insgnss.filter.measurements import NominalState, Zupt
 from insgnss.imu import ImuErrorModel, increments, increments_table
 from insgnss.io import read_imu_csv
 from insgnss.mechanization.strapdown import NavState
@@ -40,10 +40,14 @@ class _Layout:
 class _Nav:
     """The attributes of a NominalState the height models read."""
 
-    def __init__(self, height, n=16, params=None, blocks=None):
+    enu_offset = NominalState.enu_offset
+
+    def __init__(self, height, n=16, params=None, blocks=None, north=0.0):
         self.height = height
         self.layout = _Layout(n, blocks)
         self.params = np.zeros(n - 9) if params is None else params
+        self.lat, self.lon = 0.7 + north / 6.4e6, 0.1
+        self.M = self.N = 6.4e6 - height  # (M + h) = 6.4e6 m: north metres as given
 
     def param(self, name):
         s = self.layout[name]
@@ -62,6 +66,27 @@ def test_level_floor_compares_each_stance_with_the_previous_one():
     assert (m.applied, m.skipped) == (1, 1)
     with pytest.raises(InvalidValueError):
         LevelFloor([(0.0, 1.0), (0.5, 2.0)])
+
+
+def test_level_floor_tells_a_stair_from_the_error_of_a_long_stride():
+    """A change above max_step is a stair only when it is also steeper than max_slope: 0.12 m
+    over a 1.6 m running stride (0.075) is constrained, 0.17 m over a 0.3 m tread is not."""
+    m = LevelFloor([(0.0, 1.0), (2.0, 3.0), (4.0, 5.0)], std=0.003, max_step=0.05,
+                   max_slope=0.2)
+    m.evaluate(0, _Nav(10.0))
+    z, _, _ = m.evaluate(1, _Nav(9.88, north=1.6))
+    assert z[0] == pytest.approx(-0.12)
+    m.evaluate(2, _Nav(9.88, north=1.6))
+    assert m.evaluate(3, _Nav(10.05, north=1.9)) is None
+    assert (m.applied, m.skipped) == (1, 1)
+    only_step = LevelFloor([(0.0, 1.0), (2.0, 3.0)], max_step=0.05, max_slope=np.inf)
+    only_step.evaluate(0, _Nav(10.0))
+    assert only_step.evaluate(1, _Nav(10.02, north=1e3)) is not None
+    lax = LevelFloor([(0.0, 1.0), (2.0, 3.0)], max_step=0.05, max_slope=0.0)
+    lax.evaluate(0, _Nav(10.0))
+    assert lax.evaluate(1, _Nav(9.88, north=1.6)) is None  # max_slope 0: max_step alone
+    with pytest.raises(InvalidValueError):
+        LevelFloor([(0.0, 1.0)], max_slope=-0.1)
 
 
 def test_baro_height_and_offset_state():

@@ -13,12 +13,17 @@ records the nominal height ``h_ref``; at the first epoch of stance ``j``::
 
     z = h_nom - h_ref,   H = [0 0 1 0 ...],   R = sigma_floor^2
 
-unless ``|z| > max_step``: then the foot went up or down a step (stairs, a kerb, a steep
-ramp), nothing is applied and stance ``j`` becomes the new reference. ``h_ref`` is an earlier
-estimate of the same trajectory, so the constraint is relative (Groves 2013 section 16.2.5,
-"height constraints"; Park and Suh 2011 estimate the floor inclination instead). Gentle
-slopes below ``max_step`` per stride are flattened: the constraint is for walks known to be on
-one level (off by default in a job).
+unless the change is a stair step: ``|z| > max_step`` **and** ``|z| > max_slope L``, with ``L``
+the horizontal distance between the two stances. Then the foot went up or down a step (stairs,
+a kerb), nothing is applied and stance ``j`` becomes the new reference. The slope separates a
+stair from the INS's own height error on a long stride: every stair rises at least ``0.36 L``
+(riser/tread of building-code stairs, 10-20 cm over 25-28 cm; 0.22 for shallow garden steps),
+while a running foot INS loses up to 0.15 L (up to 24 cm over 1.6-1.9 m strides on the PyShoe
+running trials, docs/zupt.md section 7); ``max_slope = 0.2`` lies between them and above the
+steepest walkable ramps (1:12, 1:8 for a short kerb ramp). ``h_ref`` is an earlier estimate of
+the same trajectory, so the constraint is relative (Groves 2013 section 16.2.5, "height
+constraints"; Park and Suh 2011 estimate the floor inclination instead). Ramps are flattened:
+the constraint is for walks known to be on one level (off by default in a job).
 
 Barometric height (:class:`BaroHeight`)
 --------------------------------------
@@ -64,20 +69,26 @@ class LevelFloor(Measurement):
         constraint barely moves it (a 100 Hz simulated walk with 0.5 % climb: 94 mm without,
         41 mm with 5 mm, 18 mm with 2 mm after 28 m).
     max_step : float
-        Height change between two stances above which no constraint is applied [m].
+        Height change between two stances below which the constraint always applies [m].
+    max_slope : float
+        Height change per metre of horizontal stance-to-stance distance below which it also
+        applies (a change above both is a stair step and is skipped). ``inf``: only
+        ``max_step`` decides.
     """
 
     name = "level_floor"
 
     def __init__(self, stances: Sequence[tuple[float, float]], std: float = 0.002,
-                 max_step: float = 0.05, gate_probability: float | None = 0.0,
-                 name: str | None = None):
+                 max_step: float = 0.05, max_slope: float = 0.2,
+                 gate_probability: float | None = 0.0, name: str | None = None):
         st = np.asarray(stances, float).reshape(-1, 2)
         if st.size and (not np.all(np.isfinite(st)) or np.any(st[:, 1] < st[:, 0])
                         or np.any(st[1:, 0] < st[:-1, 1])):
             raise InvalidValueError("LevelFloor: stances must be finite, ordered intervals")
-        if not (np.isfinite(std) and std > 0 and np.isfinite(max_step) and max_step > 0):
-            raise InvalidValueError("LevelFloor: std and max_step must be positive")
+        if not (np.isfinite(std) and std > 0 and np.isfinite(max_step) and max_step > 0
+                and max_slope >= 0 and not np.isnan(max_slope)):
+            raise InvalidValueError("LevelFloor: std and max_step must be positive, max_slope"
+                                    " not negative")
         # epochs: the end of each stance (record) and the start of the next ones (compare)
         super().__init__(np.unique(np.concatenate([st[:, 1], st[1:, 0]])), gate_probability,
                          name)
@@ -85,15 +96,17 @@ class LevelFloor(Measurement):
         self._is_start = np.isin(self.times, st[1:, 0])
         self.std = float(std)
         self.max_step = float(max_step)
-        self._ref: float | None = None
+        self.max_slope = float(max_slope)
+        self._ref: tuple[float, float, float] | None = None  # lat, lon, height at stance end
         self.applied = 0
         self.skipped = 0
 
     def evaluate(self, i, nav):
         out = None
         if self._is_start[i] and self._ref is not None:
-            z = nav.height - self._ref
-            if abs(z) <= self.max_step:
+            d = nav.enu_offset(*self._ref)
+            z = d[2]
+            if abs(z) <= self.max_step or abs(z) <= self.max_slope * np.hypot(d[0], d[1]):
                 H = np.zeros((1, nav.layout.n))
                 H[0, 2] = 1.0
                 out = (np.array([z]), H, np.array([[self.std**2]]))
@@ -101,7 +114,7 @@ class LevelFloor(Measurement):
             else:
                 self.skipped += 1
         if self._is_end[i]:
-            self._ref = float(nav.height)
+            self._ref = (float(nav.lat), float(nav.lon), float(nav.height))
         return out
 
 
