@@ -218,8 +218,10 @@ def sim_effects(cfg: FootConfig) -> list[dict]:
         wr = _sim(rate=rate, oversample=int(4000 / rate))
         add(f"summed increments {rate:.0f} Hz", wr, wr.imu)
         add("  + two-sample coning/sculling correction", wr, cs(wr.imu))
-    wr = _sim(output="rates")
-    add("rate samples (point), trapezoid, 200 Hz", wr, wr.imu)
+    for rate in (200.0, 100.0, 60.0):
+        wr = _sim(rate=rate, oversample=int(4000 / rate), output="rates")
+        add(f"rate samples (point), trapezoid, {rate:.0f} Hz", wr, wr.imu)
+        add("  + two-sample coning/sculling correction", wr, cs(wr.imu))
     k = int(round(0.01 * 200))
     add("ZUPT window: late release +10 ms (toe rocker)", w, w.ideal, still=_shift_mask(still, 0, k))
     add("ZUPT window: early start -10 ms (heel rocker)", w, w.ideal, still=_shift_mask(still, k, 0))
