@@ -33,11 +33,16 @@ section 7).
 PyShoe trials (Vicon; the marker's offset from the IMU fitted per trial): from stance release
 to the heel strike, from the heel strike to the detected stance, and over the stance; with the
 spread of the stance-to-stance height changes (what ``level_floor_max_step`` has to pass).
+``--only skew``: an accelerometer-to-gyro time skew and a rigid accelerometer-to-gyro
+misalignment on the simulated walk (end height and phase split), then an accelerometer lag
+compensated over -8..+4 ms on the real walks (end height, ``J`` and its vertical part, mean
+stance-to-stance height change, PyShoe phase split), and the forward accelerometer's size effect
+compensated on six PyShoe walks.
 
 Usage::
 
     PYTHONPATH=. python bench/bench_foot_height.py [--config job.toml] [--forward] [--json]
-                                                  [--only xio|ucr|pyshoe|sim|sensor|level_floor|phases]
+                                                  [--only xio|ucr|pyshoe|sim|sensor|level_floor|phases|skew]
 """
 
 from __future__ import annotations
@@ -516,6 +521,133 @@ def print_phases(rows: list[dict]) -> None:
               f"{r['stride_dh_over_5cm']:5d} {r['stride_dh_over_10cm']:5d}")
 
 
+# --- accelerometer-gyro timing and alignment during the foot roll (fourth round) ------------
+SKEW_MS = (-8.0, -6.0, -4.0, -2.0, 0.0, 2.0, 4.0)  # assumed accelerometer lag [ms] on real data
+SIZE_MM = (-6.0, -3.0, 3.0, 6.0)  # forward accelerometer above the gyro point [mm], fold A
+
+
+def _accel_advanced(t: np.ndarray, a: np.ndarray, tau: float) -> np.ndarray:
+    """Accelerometer that lags the gyro by ``tau`` [s] compensated: ``a_c(t) = a(t + tau)``
+    (linear interpolation; ``tau < 0`` compensates an accelerometer that leads)."""
+    return np.column_stack([np.interp(t + tau, t, a[:, i]) for i in range(a.shape[1])])
+
+
+def _rotation(axis: int, deg: float) -> np.ndarray:
+    from insgnss.attitude import rotvec_to_dcm
+
+    v = np.zeros(3)
+    v[axis] = np.radians(deg)
+    return rotvec_to_dcm(v)
+
+
+def skew_sim(cfg: FootConfig) -> list[dict]:
+    """The simulated level walk (200 Hz point samples from the 4 kHz grid, truth stances) with
+    the accelerometer delayed against the gyro, ``f_meas(t) = f(t - tau)``, its triad rotated
+    rigidly against the gyro triad, or one axis displaced (size effect); end height and the
+    per-stride phase split of the forward filter (:func:`stride_phases` against the simulated
+    height)."""
+    from insgnss.earth import geodetic_to_enu
+    from insgnss.imu import ACCEL_COLS, GYRO_COLS, rates_table
+
+    rate = 200.0
+    fine = _sim(rate=rate * FINE, oversample=1, output="rates")
+    w = fine.imu[GYRO_COLS].to_numpy()
+    a = fine.imu[ACCEL_COLS].to_numpy()
+    t = np.asarray(fine.imu.index, float)
+    tr = fine.truth.iloc[::FINE]
+    still = tr.stationary.to_numpy() > 0.5
+    site = (tr.lat.iloc[0], tr.lon.iloc[0], tr.height.iloc[0])
+    _, _, u = geodetic_to_enu(tr.lat.values, tr.lon.values, tr.height.values, *site)
+    rows = []
+
+    def add(name, af):
+        imu = rates_table(t[::FINE], w[::FINE], af[::FINE])
+        res = run_foot_ins(imu, cfg, still=still, lat=site[0], lon=site[1], height=site[2])
+        rows.append({"effect": name, "dh": float(res.trajectory.up.iloc[-1] - u[-1]),
+                     **stride_phases(res, imu, u)})
+
+    add("none", a)
+    for ms in (-5.0, -2.0, 2.0, 5.0):
+        add(f"accel delayed {ms:+.0f} ms", _accel_advanced(t, a, -1e-3 * ms))
+    for axis in range(3):
+        for deg in (0.5, 2.0):
+            add(f"accel triad rotated {deg} deg about {'xyz'[axis]}", a @ _rotation(axis, deg).T)
+    wdot = np.gradient(w, t, axis=0)
+    add("size effect: y accel 3 mm up", _size_effect(w, wdot, a, 1, (0, 0, 3e-3)))
+    add("size effect: z accel 3 mm up", _size_effect(w, wdot, a, 2, (0, 0, 3e-3)))
+    return rows
+
+
+def skew_real(cfg: FootConfig) -> list[dict]:
+    """An accelerometer lag compensated over :data:`SKEW_MS` on the real walks (the preset's
+    own stance windows, held fixed): end height error, ``J`` and its vertical part at stance
+    entry, the mean stance-to-stance height change, and on PyShoe the phase split (Vicon).
+    On fold A (the first six walks of 2017-11-22) also the forward accelerometer's size effect
+    compensated over :data:`SIZE_MM` (rows with ``y_accel_up_mm`` instead of ``skew_ms``)."""
+    from insgnss.detect import imu_rates, stance_entry_rms
+    from insgnss.imu import rates_table
+
+    tracks = []
+    for mat in sorted((DATA / "pyshoe-vicon").glob("2017-11-2[27]-*.mat")):
+        imu, truth = convert.to_insgnss(mat)
+        tracks.append((mat.stem, imu, SITES["pyshoe"], truth["z"].to_numpy() - truth["z"].iloc[0]))
+    tracks += [(f"xio {n.split('_')[0]}", read_xio(n), SITES["xio"], None)
+               for n in ("short_walk", "long_walk")]
+    tracks += [(f"ucr {s}", read_ucr(s), SITES["ucr"], None) for s in ("left", "right")]
+    fold_a = [n for n, *_ in tracks if n.startswith("2017-11-22")][:6]
+    rows = []
+    for name, imu, site, tz in tracks:
+        t, w, a = imu_rates(imu)
+        still = run_foot_ins(imu, cfg, lat=site[0], lon=site[1],
+                             height=site[2]).stillness.still.to_numpy(bool)
+        starts = np.array([s for s, _ in _runs(still)[1:]])
+        for ms in SKEW_MS:
+            im = rates_table(t, w, _accel_advanced(t, a, 1e-3 * ms))
+            res = run_foot_ins(im, cfg, still=still, lat=site[0], lon=site[1], height=site[2])
+            nu = res.innovations[["zupt_e", "zupt_n", "zupt_u"]].to_numpy()
+            up = res.forward.up.to_numpy()
+            row = {"track": name, "skew_ms": ms,
+                   "dh": float(res.trajectory.up.iloc[-1] - (0.0 if tz is None else tz[-1])),
+                   "J_mm_s": 1e3 * stance_entry_rms(nu, still),
+                   "J_up_mm_s": 1e3 * float(np.sqrt(np.nanmean(nu[starts, 2] ** 2))),
+                   "stride_dh_mm": 1e3 * float(np.mean(np.diff(up[starts])))}
+            if tz is not None:
+                row.update(stride_phases(res, im, tz))
+            rows.append(row)
+        if name in fold_a:  # the forward accelerometer's size effect compensated
+            wdot = np.gradient(w, t, axis=0)
+            for mm in SIZE_MM:
+                im = rates_table(t, w, _size_effect(w, wdot, a, 1, (0.0, 0.0, -1e-3 * mm)))
+                res = run_foot_ins(im, cfg, still=still, lat=site[0], lon=site[1],
+                                   height=site[2])
+                nu = res.innovations[["zupt_e", "zupt_n", "zupt_u"]].to_numpy()
+                rows.append({"track": name, "y_accel_up_mm": mm,
+                             "dh": float(res.trajectory.up.iloc[-1] - tz[-1]),
+                             "J_mm_s": 1e3 * stance_entry_rms(nu, still),
+                             **stride_phases(res, im, tz)})
+    return rows
+
+
+def print_skew(sim: list[dict], real: list[dict]) -> None:
+    print("simulated level walk, 200 Hz, truth stances; per stride [mm]: release->heel strike, "
+          "heel strike->stance, stance")
+    for r in sim:
+        print(f"  {r['effect']:40s} dh {r['dh']:+7.3f} m  {1e3 * r['swing_to_heel_strike']:+6.1f} "
+              f"{1e3 * r['heel_strike_to_stance']:+6.1f} {1e3 * r['stance']:+6.1f}")
+    print("real walks, accelerometer lag compensated [ms]: end height [m], J, J_up [mm/s], "
+          "mean stance-to-stance dh [mm], phases [mm per stride] (PyShoe)")
+    for r in real:
+        if "y_accel_up_mm" in r:
+            print(f"  {r['track']:22s} y accel {r['y_accel_up_mm']:+4.0f} mm above, compensated: "
+                  f"dh {r['dh']:+7.3f}  J {r['J_mm_s']:6.1f}  {1e3 * r['swing_to_heel_strike']:+6.1f} "
+                  f"{1e3 * r['heel_strike_to_stance']:+6.1f} {1e3 * r['stance']:+6.1f}")
+            continue
+        ph = (f"  {1e3 * r['swing_to_heel_strike']:+6.1f} {1e3 * r['heel_strike_to_stance']:+6.1f} "
+              f"{1e3 * r['stance']:+6.1f}" if "stance" in r else "")
+        print(f"  {r['track']:22s} {r['skew_ms']:+5.1f}  dh {r['dh']:+7.3f}  J {r['J_mm_s']:6.1f}  "
+              f"J_up {r['J_up_mm_s']:6.1f}  {r['stride_dh_mm']:+6.1f}{ph}")
+
+
 def run_all(cfg: FootConfig, forward: bool = False) -> list[dict]:
     return run_xio(cfg, forward) + run_ucr(cfg, forward) + run_pyshoe(cfg, forward)
 
@@ -540,7 +672,7 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--forward", action="store_true", help="the causal filter, not smoothed")
     p.add_argument("--json", action="store_true")
     p.add_argument("--only", choices=["xio", "ucr", "pyshoe", "sim", "level_floor", "sensor",
-                                      "phases"],
+                                      "phases", "skew"],
                    default=None)
     a = p.parse_args(argv)
     cfg = load_config(a.config)
@@ -551,6 +683,13 @@ def main(argv: list[str] | None = None) -> int:
             print(json.dumps({"simulation": sim, "real": real}, indent=1))
         else:
             print_sensor(sim, real)
+        return 0
+    if a.only == "skew":
+        sim, real = skew_sim(cfg), skew_real(cfg)
+        if a.json:
+            print(json.dumps({"simulation": sim, "real": real}, indent=1))
+        else:
+            print_skew(sim, real)
         return 0
     if a.only == "sim":
         rows = sim_effects(cfg)
