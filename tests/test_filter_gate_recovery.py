@@ -107,6 +107,26 @@ def test_runaway_restart_empties_the_windows():
         rw.push(0, "gnss_pos", 4.0, 100.0)  # stays high after the restart: stopped
 
 
+def test_runaway_count_is_of_epochs_not_rows():
+    """Ten per-satellite rows at one epoch count as one epoch: the check waits for
+    ``min_count`` distinct times of the type, however many rows each holds."""
+    from insgnss.errors import FilterHealthError
+    from insgnss.filter.health import RunawayNis
+
+    rw = RunawayNis(1, window=30.0, bound=25.0, min_count=3, capacity=64)
+    for k in range(2):  # 2 epochs x 10 satellites: 20 rows, all 10 sigma off
+        for _ in range(10):
+            rw.push(0, "pseudorange", 1.5 * k, 100.0)
+    assert int(rw.state[0, 1]) == 20  # 20 values held, the check has not applied
+    with pytest.raises(FilterHealthError, match="at 3 epochs"):
+        for _ in range(10):
+            rw.push(0, "pseudorange", 3.0, 100.0)  # the third epoch: stopped
+    # before the change the first epoch's tenth row (10 >= min_count rows) stopped it
+    rw = RunawayNis(1, window=30.0, bound=25.0, min_count=10, capacity=64)
+    for _ in range(12):
+        rw.push(0, "pseudorange", 0.0, 100.0)
+
+
 def test_violated_constraint_is_never_forced_in(sim):
     """A lateral-velocity constraint violated by 0.8 m/s from the turn on (a skidding car, an
     IMU far from the rear axle): rejected for longer than the recovery time, never

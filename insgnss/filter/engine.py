@@ -147,7 +147,8 @@ class FilterConfig:
     nis_bound : float
         Largest allowed median ``NIS / dof`` over the window.
     nis_min_count : int
-        Measurements of one type needed in the window before the check applies.
+        Epochs (distinct times) with measurements of one type needed in the window before the
+        check applies (one epoch of per-satellite rows counts once).
     extra_noise : DataFrame or None
         Extra process noise at given times, e.g. for IMU gaps the mechanization bridged
         (:func:`insgnss.policies.gap_noise`): indexed by time [s] with columns ``pos_std``

@@ -3,7 +3,9 @@ runaway normalized innovations (one implementation for the Python and compiled u
 
 Runaway NIS: for one measurement type, the median normalized innovation ``NIS / dof`` (before
 gating, so rejected measurements count) over the last ``window`` seconds must not exceed
-``bound`` once the window holds at least ``min_count`` measurements. A consistent filter has a
+``bound`` once the window holds measurements at ``min_count`` distinct epochs (times): a type
+with one row per satellite (a pseudorange) gives ten rows at one epoch, which say as much about
+a diverged filter as one position fix, so the count is of epochs, not rows. A consistent filter has a
 median ``NIS / dof`` below 1 (about 0.45-0.8 for 1-3 dof); a median beyond 25 means the
 measurements sit 5 sigma away most of the time: the filter diverged or its noise model is badly
 wrong, and its solution should not be trusted silently. The median is evaluated at most once per
@@ -12,7 +14,7 @@ second per type.
 After a gate recovery (:mod:`.gating`: the covariance was inflated, the state re-anchored) the
 windows of all types restart empty (:func:`runaway_restart`): the NIS values before it describe
 the state that was abandoned, so a run that recovered is stopped only if the median stays above
-``bound`` over at least ``min_count`` measurements *after* the recovery.
+``bound`` over at least ``min_count`` epochs *after* the recovery.
 
 Only measurements that judge the filter are watched: when a run has absolute measurements
 (:attr:`~insgnss.filter.measurements.Measurement.recoverable`, e.g. GNSS), the constraints
@@ -69,7 +71,8 @@ def runaway_push(buf_t, buf_v, state, tid, time, nnis, window, min_count, bound,
 
     ``buf_t, buf_v`` (types, capacity): ring buffers of (time, NIS/dof); ``state`` (types, 3):
     (head, count, time of the last check). Values older than ``window`` are dropped; a full
-    buffer drops its oldest value (the capacity is sized for the densest window).
+    buffer drops its oldest value (the capacity is sized for the densest window). The median
+    is taken once the window holds values at ``min_count`` distinct times (epochs).
     """
     cap = buf_t.shape[1]
     head = int(state[tid, 0])
@@ -88,9 +91,18 @@ def runaway_push(buf_t, buf_v, state, tid, time, nnis, window, min_count, bound,
     state[tid, 1] = cnt
     if cnt < min_count or time - state[tid, 2] < 1.0:
         return -1.0
-    state[tid, 2] = time
+    # the window must span min_count distinct epochs (times are pushed in order)
+    epochs = 0
+    last = -np.inf
     for i in range(cnt):
+        ti = buf_t[tid, (head + i) % cap]
+        if ti != last:
+            epochs += 1
+            last = ti
         scratch[i] = buf_v[tid, (head + i) % cap]
+    if epochs < min_count:
+        return -1.0
+    state[tid, 2] = time
     med = np.median(scratch[:cnt])
     if med > bound:
         return med
@@ -142,4 +154,11 @@ class RunawayNis:
             f"runaway NIS at t = {time:.6f} s: the median NIS/dof of the {name!r} measurements over "
             f"the last {self.window:g} s is {med:.4g} (filter diverged or measurement noise "
             "far too small)", column=name, expected=f"a median NIS/dof <= {self.bound:g}",
-            found=f"{med:.4g} over {int(self.state[tid, 1])} measurements")
+            found=f"{med:.4g} over {int(self.state[tid, 1])} measurements at "
+                  f"{self.epochs(tid)} epochs")
+
+    def epochs(self, tid: int) -> int:
+        """Distinct times among the values of type ``tid`` in its window."""
+        cap = self.buf_t.shape[1]
+        head, cnt = int(self.state[tid, 0]), int(self.state[tid, 1])
+        return int(np.unique(self.buf_t[tid, (head + np.arange(cnt)) % cap]).size)
