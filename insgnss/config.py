@@ -646,6 +646,18 @@ SCHEMA: dict[str, Any] = {
         "static_intervals": _spec(list, None, "declared still intervals [[t0, t1], ...] (also "
                                   "used by insgnss compare)", check=_windows()),
         "nhc": _spec(bool, False, "non-holonomic constraint (land vehicles)"),
+        "heading_reinit": _spec(bool, False, "land vehicle: re-initialise the heading (and "
+                                "horizontal velocity) from the GNSS course when the forward "
+                                "axis disagrees with it while the GNSS innovations are large "
+                                "(strapdown, LLF frame; docs/filter.md)", when=HAS_GNSS),
+        "heading_reinit_angle_deg": _spec(_NUM, 30.0, "heading-course disagreement that counts "
+                                          "[deg]", check=_number(5.0, 180.0),
+                                          when=_on("aiding.heading_reinit")),
+        "heading_reinit_duration": _spec(_NUM, 3.0, "how long the disagreement must last [s]",
+                                         check=POSITIVE, when=_on("aiding.heading_reinit")),
+        "heading_reinit_min_speed": _spec(_NUM, 5.0, "GNSS speed above which the course counts "
+                                          "[m/s] (reversing is slower)", check=POSITIVE,
+                                          when=_on("aiding.heading_reinit")),
         "nhc_std": _spec(list, [0.1, 0.1], "lateral, vertical body velocity sigma [m/s]",
                          check=_vector(2, POSITIVE), when=_on("aiding.nhc")),
         "nhc_interval": _spec(_NUM, 0.25, "NHC update interval [s]: the constraint's violations "

@@ -53,6 +53,7 @@ from ..imu import ImuErrorModel
 from ..mechanization.strapdown import NavState
 from . import gating, health, highrate
 from .gating import GateTable
+from .heading_reinit import HeadingMonitor, HeadingReinit, reset_covariance
 from .health import RunawayNis, check_covariance
 from .measurements import Measurement
 from .models import BIAS_MODELS, ERROR_DYNAMICS, StateLayout
@@ -169,6 +170,10 @@ class FilterConfig:
     smoother_covariance : bool
         Run the smoother's covariance recursion (smoothed ``*_std`` columns and
         ``P_smoothed``); without it the smoothed table has NaN stds (cheaper at high rate).
+    heading_reinit : HeadingReinit or None
+        Re-initialise the heading of a land vehicle from the GNSS course when it disagrees
+        with it while the GNSS innovations run away (:mod:`.heading_reinit`; LLF strapdown
+        model only); ``None``: never.
     """
 
     imu_model: ImuErrorModel | str = "tactical"
@@ -204,6 +209,7 @@ class FilterConfig:
     accel_dynamic_noise: float = 0.0
     gyro_dynamic_noise: float = 0.0
     smoother_covariance: bool = True
+    heading_reinit: HeadingReinit | None = None
 
     def validate(self) -> None:
         if self.bias_model not in BIAS_MODELS:
@@ -269,6 +275,9 @@ class FilterResult:
     feedback : (E, n) array
         Error estimate removed from the nominal at each node.
     P_smoothed : (E, n, n) array or None
+    heading_reinits : list of dict
+        The heading re-initialisations (:mod:`.heading_reinit`): ``time``, ``course_time``,
+        ``old_heading_deg``, ``new_heading_deg``, ``heading_std_deg``, ``speed``, ``reason``.
     final : NavState
         Nominal state at the last processed epoch.
     params : (E, p) array
@@ -306,6 +315,7 @@ class FilterResult:
     updates: dict | None = field(default=None, repr=False)
     high_rate: dict | None = field(default=None, repr=False)
     log: dict | None = field(default=None, repr=False)
+    heading_reinits: list = field(default_factory=list)
 
 
 class _Run:
@@ -358,6 +368,15 @@ class _Run:
             self.xn_t, self.xn_var = np.empty(0), np.empty((0, len(EXTRA_NOISE_COLS)))
         self.xn_i = int(np.searchsorted(self.xn_t, self.sched.epochs[0], side="right"))
         self.I = np.eye(n)
+        self.heading = None  # the heading re-initialisation monitor (.heading_reinit)
+        self.abs_nis = np.nan  # largest NIS/dof of the absolute measurements at this epoch
+        self.reinits: list = []
+        if config.heading_reinit is not None:
+            if not getattr(model, "heading_reset", False):
+                raise ConfigError("the heading re-initialisation needs the LLF strapdown "
+                                  "process model", column="heading_reinit",
+                                  found=type(model).__name__)
+            self.heading = HeadingMonitor(config.heading_reinit)
 
 
 def _window_capacity(run: _Run, window) -> int:
@@ -438,6 +457,8 @@ def _gate(run: _Run, m, time: float, z, H, R, P, label: str = ""):
     nis = gating.nis(S, z)
     tid = run.tid[m.name]
     run.runaway.push(tid, m.name, time, nis / z.size)
+    if getattr(m, "recoverable", False) and not nis / z.size <= run.abs_nis:
+        run.abs_nis = nis / z.size  # for the heading monitor (NaN start: the first one)
     thr = run.gates.threshold(run.gates.probability(m), z.size)
     row = _streak_row(run, tid, label)  # may grow run.streak: before passing the array
     rec = run.recovery[tid]  # -1 for a type that may not be forced in
@@ -506,6 +527,31 @@ def _update(run: _Run, e: int, x, P):
     return x, P, Pp
 
 
+def _heading_reinit(run: _Run, te: float, P):
+    """Before the update of epoch ``te`` (the error state is zero): re-initialise the heading
+    and the horizontal velocity from the GNSS course when the monitor asks for it
+    (:mod:`.heading_reinit`); returns ``(P(e|e-1), reset?)``. The update then runs from the
+    reset nominal and covariance (its ``P(e|e-1)``, like a gate recovery's)."""
+    model = run.model
+    ev = run.heading.check(te, model.nominal(te).C)
+    if ev is None:
+        return P, False
+    c = run.config.heading_reinit.course
+    lay = model.layout
+    att, vel = lay["att"], lay["vel"]
+    d = np.zeros(lay.n)
+    d[att.start + 2] = ev.d  # C <- exp(-[phi x]) C with phi = (0, 0, d): heading + d
+    nav = model.nominal(te)
+    d[vel.start] = nav.vel[0] - c.vel_e[ev.k]
+    d[vel.start + 1] = nav.vel[1] - c.vel_n[ev.k]
+    model.feedback(d)
+    P = reset_covariance(P, att.start + 2, (vel.start, vel.start + 1),
+                         float(c.course_std[ev.k]) ** 2, float(c.vel_std[ev.k]) ** 2)
+    run.runaway.restart()  # the NIS before the reset describes the abandoned state
+    run.reinits.append(ev.record)
+    return P, True
+
+
 def run_engine(model: ProcessModelBase, measurements: list[Measurement], config: FilterConfig,
                progress: bool = False) -> FilterResult:
     """Run the engine (module docstring) with a prepared process model.
@@ -545,7 +591,14 @@ def run_engine(model: ProcessModelBase, measurements: list[Measurement], config:
             c0 = perf()
             fb = None
             store.open(node)
+            run.abs_nis = np.nan
+            if run.heading is not None:
+                P, cut = _heading_reinit(run, te, P)
+                if cut:  # a smoother boundary: nothing flows back across the reset
+                    Phi = np.zeros_like(Phi)
             x, P, Pp = _update(run, e, x, P) if sched.ptr[e + 1] > sched.ptr[e] else (x, P, P)
+            if run.heading is not None:
+                run.heading.note(run.abs_nis)
             if store.r0[node] < store.n_rows:  # an update was applied: feed back and reset
                 fb = x
                 model.feedback(x)
@@ -607,7 +660,7 @@ def _finish(run: _Run, completed: int, error, t_start: float) -> FilterResult:
         epoch_times=store.t[:n_ok].copy(), P_filtered=store.Pf[:n_ok],
         P_predicted=store.Pp[:n_ok], feedback=store.fb[:n_ok], P_smoothed=Ps, error=error,
         final=model.final_state(float(t_last)), params=store.par[:n_ok], Phi=store.Phi[:n_ok],
-        updates=updates, high_rate=high_rate, log=log)
+        updates=updates, high_rate=high_rate, log=log, heading_reinits=list(run.reinits))
 
 
 def run_filter(

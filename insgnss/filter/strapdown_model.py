@@ -98,6 +98,7 @@ class StrapdownModel(ProcessModelBase):
     n_nav = 9
     split = True
     high_rate = True
+    heading_reset = True  # the engine may rotate the heading (.heading_reinit)
 
     def __init__(self, imu: pd.DataFrame, initial: NavState, extras, config):
         t, dth, dv = increments(imu)

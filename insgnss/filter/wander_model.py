@@ -118,6 +118,7 @@ class WanderModel(StrapdownModel):
     angle (any value; the results do not depend on it)."""
 
     high_rate = False
+    heading_reset = False  # its attitude error is in the ECEF frame (.heading_reinit: LLF)
 
     def _setup(self, t, dth, dv, initial, extras, config):
         if config.error_dynamics != "full":

@@ -48,6 +48,7 @@ from ..filter.measurements import (
     Zaru,
     Zupt,
 )
+from ..filter.heading_reinit import CourseTrack
 from ..validate import check_gnss_in_imu_span, warn
 from .inputs import Inputs
 from .windows import describe_windows, outside_windows
@@ -261,6 +262,9 @@ class Aiding:
     sources: list[Source] = field(default_factory=list)
     #: threshold of the default stillness detector [m/s^2] (None: not used)
     still_threshold: float | None = None
+    #: the GNSS epochs the loosely coupled sources may use (after the span, outage and Q
+    #: steps; None without them): the course of the heading re-initialisation
+    gnss_used: pd.DataFrame | None = None
 
     @property
     def models(self) -> list[Measurement]:
@@ -280,9 +284,10 @@ def _source_file(table) -> str | None:
 
 
 def _gnss_sources(job: Job, gnss: pd.DataFrame, lever_arm, windows, imu: pd.DataFrame
-                  ) -> list[Source]:
+                  ) -> tuple[list[Source], pd.DataFrame | None]:
     """GNSS position / velocity sources: IMU span -> after the initial epoch -> outside the
-    outage windows -> quality flag admitted by ``q_scale`` -> finite values and sigmas."""
+    outage windows -> quality flag admitted by ``q_scale`` -> finite values and sigmas; and
+    the GNSS epochs left before the last step (None without epochs)."""
     a = job["aiding"]
     file = _source_file(gnss)
     tg = gnss.index.to_numpy(float)
@@ -291,7 +296,7 @@ def _gnss_sources(job: Job, gnss: pd.DataFrame, lever_arm, windows, imu: pd.Data
         empty = [Step(0, "epochs in the GNSS data", "the GNSS data holds no epoch", "time")]
         return [Source(key, kind, what, empty, None, file, 0) for key, kind, what in
                 (("aiding.gnss_position", "gnss_pos", "GNSS positions"),
-                 ("aiding.gnss_velocity", "gnss_vel", "GNSS velocities")) if a[key[7:]]]
+                 ("aiding.gnss_velocity", "gnss_vel", "GNSS velocities")) if a[key[7:]]], None
     steps = [Step(len(gnss), "epochs in the GNSS data")]
     n_span = int(np.count_nonzero((tg >= t0) & (tg <= t1)))
     steps.append(Step(n_span, "inside the IMU time span",
@@ -323,6 +328,7 @@ def _gnss_sources(job: Job, gnss: pd.DataFrame, lever_arm, windows, imu: pd.Data
                           f"{', '.join(map(str, sorted(use_q)))}", "q",
                           "with a Q not admitted by aiding.q_scale"))
     q_steps = steps
+    used = g[np.isin(g["q"].to_numpy(), use_q)] if use_q is not None else g
     out = []
     if a["gnss_position"]:
         std = a["gnss_position_std"]
@@ -376,7 +382,52 @@ def _gnss_sources(job: Job, gnss: pd.DataFrame, lever_arm, windows, imu: pd.Data
                              "sigma <= 0", "vel_e_std" if std is None else
                              "aiding.gnss_velocity_std", "with a non-finite velocity or sigma")]
         out.append(Source("aiding.gnss_velocity", m.name, "GNSS velocities", st, m, file, 3))
-    return out
+    return out, used
+
+
+def course_track(job: Job, used: pd.DataFrame, windows) -> CourseTrack | None:
+    """The GNSS course samples of the heading re-initialisation (docs/filter.md) from the
+    GNSS epochs the run may use: from the velocity (at its own time, :func:`velocity_table`)
+    when the file has one, else from the central difference of successive positions less than
+    2 s apart (per-axis sigma ``sqrt(2) sigma_pos / dt``); the course sigma adds the side slip
+    (``initialization.course_heading_std_deg``). None when no sample remains."""
+    from ..align import heading_from_velocity
+    from ..earth import geodetic_to_enu
+
+    a = job["aiding"]
+    slip = np.radians(job["initialization"]["course_heading_std_deg"])
+    vmin = float(a["heading_reinit_min_speed"])
+    if used is None or len(used) < 3:
+        return None
+    if "vel_e" in used.columns and "vel_n" in used.columns:
+        g = velocity_table(used, windows)
+        ve, vn = g["vel_e"].to_numpy(float), g["vel_n"].to_numpy(float)
+        if a["gnss_velocity_std"] is not None:
+            sv = np.full(ve.shape, float(a["gnss_velocity_std"]))
+        elif "vel_e_std" in g.columns and "vel_n_std" in g.columns:
+            sv = np.sqrt(0.5 * (g["vel_e_std"].to_numpy(float) ** 2
+                                + g["vel_n_std"].to_numpy(float) ** 2))
+        else:  # NMEA gives no velocity sigma: a Doppler velocity of a consumer receiver
+            sv = np.full(ve.shape, 0.1)
+        t = g.index.to_numpy(float)
+    else:
+        t0 = used.index.to_numpy(float)
+        lat, lon, h = (used[c].to_numpy(float) for c in ("lat", "lon", "height"))
+        e, n, _ = geodetic_to_enu(lat, lon, h, float(lat[0]), float(lon[0]), float(h[0]))
+        dt = t0[2:] - t0[:-2]
+        ok = dt < 2.0
+        t = t0[1:-1][ok]
+        ve, vn = ((x[2:] - x[:-2])[ok] / dt[ok] for x in (e, n))
+        sp = float(a["gnss_position_std"]) if a["gnss_position_std"] is not None else None
+        if sp is None and "east_std" in used.columns:
+            sp_all = np.hypot(used["east_std"].to_numpy(float),
+                              used["north_std"].to_numpy(float)) / np.sqrt(2.0)
+            sp_all = sp_all[1:-1][ok]
+        else:
+            sp_all = np.full(t.shape, 1.0 if sp is None else sp)
+        sv = np.sqrt(2.0) * sp_all / dt[ok]
+    track = CourseTrack.from_velocity(t, ve, vn, sv, heading_from_velocity(ve, vn, vmin), slip)
+    return track if track.t.size else None
 
 
 def reception_times(prepared: pd.DataFrame, spp: pd.DataFrame) -> pd.DataFrame:
@@ -488,7 +539,8 @@ def build_aiding(job: Job, inputs: Inputs, windows, imu: pd.DataFrame,
     if a["gnss"] == "tight":
         src.sources += _raw_sources(job, inputs, windows, imu)
     elif inputs.gnss is not None:
-        src.sources += _gnss_sources(job, inputs.gnss, inputs.lever_arm, windows, imu)
+        gs, src.gnss_used = _gnss_sources(job, inputs.gnss, inputs.lever_arm, windows, imu)
+        src.sources += gs
     if a["zupt"] or a["zaru"]:
         ts, src.still_threshold = stillness_times(job, imu, static)
         how = "the stillness detector ([aiding.detector])" if a["detector"] or \

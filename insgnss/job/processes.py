@@ -38,7 +38,15 @@ from ..imu import ImuErrorModel, coning_sculling, increments, increments_table
 from ..policies import gap_noise
 from ..preprocess import with_static_noise
 from ..validate import warn
-from .aiding import Aiding, applied_check, build_aiding, check_aiding, measurement_counts
+from ..filter.heading_reinit import HeadingReinit
+from .aiding import (
+    Aiding,
+    applied_check,
+    build_aiding,
+    check_aiding,
+    course_track,
+    measurement_counts,
+)
 from .context import RunContext
 from .evaluation import evaluate_result
 from .initialization import Initialization, initialize
@@ -63,6 +71,21 @@ def filter_config(job: Job, model: ImuErrorModel, init: Initialization) -> Filte
         gate_recovery=f["gate_recovery"] or None, nis_window=f["nis_window"] or None,
         nis_bound=f["nis_bound"],
         gyro_bias=None if init.gyro_bias is None else tuple(init.gyro_bias))
+
+
+def heading_reinit(job: Job, aiding: Aiding, windows) -> HeadingReinit | None:
+    """The heading re-initialisation of ``aiding.heading_reinit`` (LLF strapdown only: the
+    wander-azimuth frame keeps its heading error in the ECEF frame) with the GNSS course of
+    the epochs the run uses; None when off or without a course sample."""
+    a = job["aiding"]
+    if not a["heading_reinit"] or job["filter"]["frame"] == "wander":
+        return None
+    track = course_track(job, aiding.gnss_used, windows)
+    if track is None:
+        return None
+    return HeadingReinit(track, angle=np.radians(a["heading_reinit_angle_deg"]),
+                         duration=float(a["heading_reinit_duration"]),
+                         min_speed=float(a["heading_reinit_min_speed"]))
 
 
 def static_noise_model(ctx: RunContext, init: Initialization, model: ImuErrorModel
@@ -122,6 +145,7 @@ def _strapdown_filter(ctx: RunContext, tuned: Tuned, smoother: bool = True):
         cfg.gate_recovery = None
     if job["inputs"]["imu"]["gap_noise"]:
         cfg.extra_noise = gap_noise(imu, ctx.imu_report["gaps"])  # bridged IMU gaps
+    cfg.heading_reinit = heading_reinit(job, aiding, tuned.windows)
     if job["filter"]["frame"] == "wander":
         from ..filter.wander_model import run_wander_filter
 

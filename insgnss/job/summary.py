@@ -89,6 +89,7 @@ def filter_summary(out: JobResult, counts: dict, notes: list[str], model_name: s
         "imu_samples": int(n_imu), "initialization": initialization_summary(out.init),
         "measurements": counts,
         "aiding_warnings": list(notes),
+        "heading_reinitialisations": list(getattr(res, "heading_reinits", None) or []),
         "outages": [list(w) for w in out.windows],
         "imu_model": model_name,
         **extra,
