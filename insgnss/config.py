@@ -485,6 +485,10 @@ SCHEMA: dict[str, Any] = {
                                "gaps (rate tables; insgnss.policies.gap_noise)"),
             "duplicates": _spec(str, "drop", "repeated time stamps: drop with a warning (first "
                                 "kept) or stop", choices=["drop", "error"]),
+            "spike_policy": _spec(str, "off", "single-sample gyro/accelerometer spikes: off, "
+                                  "flag (warn and list in the summary) or bridge (also replace "
+                                  "each by the mean of its neighbours; docs/jobs.md, "
+                                  "Robustness)", choices=["off", "flag", "bridge"]),
         },
         "gnss": {
             "format": _spec(str, "rtklib_pos", "GNSS file format",

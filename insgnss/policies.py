@@ -15,7 +15,14 @@ treatment and every run reports what was repaired (``summary.json`` ``"imu"``):
   Longer gaps follow ``inputs.imu.gap_policy``: ``"error"`` (default) stops with a
   :class:`~insgnss.errors.DataGapError` naming the file and row after the gap, ``"bridge"``
   bridges them too, ``"split"`` processes the contiguous segments as separate runs
-  (:mod:`insgnss.job.segments`).
+  (:mod:`insgnss.job.segments`);
+- **single-sample spikes** (``inputs.imu.spike_policy``, :func:`apply_spike_policy`; off by
+  default): a sample whose gyro or accelerometer vector departs from the mean of its two
+  neighbours by more than :data:`SPIKE_FACTOR` times the recording's 99.9th percentile of the
+  sample-to-sample change, while the two neighbours agree with each other to within
+  ``1 / SPIKE_FACTOR`` of that departure, is a spike (a bit error, a logger glitch: no motion
+  changes the rate for one sample only). ``"flag"`` warns and lists them (``summary.json``
+  ``"imu"`` ``"spikes"``), ``"bridge"`` also replaces each by the mean of its neighbours.
 """
 
 from __future__ import annotations
@@ -26,7 +33,12 @@ import numpy as np
 import pandas as pd
 
 from .config import Job
-from .validate import GapPolicy, apply_gap_policy, check_time_order, find_gaps
+from .imu import ACCEL_COLS, DTHETA_COLS, DV_COLS, GYRO_COLS, RATE_COLS
+from .validate import GapPolicy, apply_gap_policy, check_time_order, find_gaps, warn
+
+#: a single-sample spike departs from its neighbours by this many times the recording's
+#: 99.9th percentile of the sample-to-sample change (module docstring)
+SPIKE_FACTOR = 10.0
 
 
 def gap_policy(job: Job) -> GapPolicy:
@@ -100,6 +112,82 @@ def check_imu_table(imu: pd.DataFrame, policy: GapPolicy, duplicates: str = "dro
               "dropped_duplicates": dropped,
               "segments": [[float(a), float(b)] for a, b in segments]}
     return out, report
+
+
+def find_spikes(x: np.ndarray) -> np.ndarray:
+    """Indices of the single-sample spikes of the vector series ``x`` (N, 3) (module
+    docstring)."""
+    x = np.asarray(x, float)
+    if x.shape[0] < 5:
+        return np.zeros(0, np.int64)
+    step = np.linalg.norm(np.diff(x, axis=0), axis=1)
+    level = float(np.nanpercentile(step, 99.9))
+    dev = np.linalg.norm(x[1:-1] - 0.5 * (x[:-2] + x[2:]), axis=1)
+    agree = np.linalg.norm(x[2:] - x[:-2], axis=1)
+    spike = (dev > SPIKE_FACTOR * max(level, 1e-12)) & (agree * SPIKE_FACTOR < dev)
+    return np.flatnonzero(spike) + 1
+
+
+def sample_rates(imu: pd.DataFrame, sensor: str) -> tuple[list[str] | None, np.ndarray | None]:
+    """The columns of ``sensor`` (``"gyro"`` or ``"accel"``) in an IMU table and its samples
+    as rates (N, 3) [rad/s, m/s^2]: the rate columns as they are, increments over their own
+    interval (the first over the median interval); ``(None, None)`` without them."""
+    rates, incs = (GYRO_COLS, DTHETA_COLS) if sensor == "gyro" else (ACCEL_COLS, DV_COLS)
+    if all(c in imu.columns for c in rates):
+        return rates, imu[rates].to_numpy(float)
+    if not all(c in imu.columns for c in incs) or len(imu) < 2:
+        return None, None
+    return incs, imu[incs].to_numpy(float) / _sample_intervals(imu)[:, None]
+
+
+def _sample_intervals(imu: pd.DataFrame) -> np.ndarray:
+    """Interval of each sample of an increment table (the first: the median interval)."""
+    t = np.asarray(imu.index, float)
+    return np.diff(t, prepend=t[0] - float(np.median(np.diff(t))))
+
+
+def apply_spike_policy(imu: pd.DataFrame, policy: str) -> tuple[pd.DataFrame, list[dict]]:
+    """``inputs.imu.spike_policy`` (module docstring): ``"off"`` returns the table as it is;
+    ``"flag"`` warns and lists the spikes; ``"bridge"`` also replaces each spiking sensor's
+    vector by the mean of its two neighbours. Returns ``(table, spikes)``, each spike ``{"time",
+    "row", "sensor", "value", "neighbours", "action"}`` (value and neighbours' mean as vector
+    norms in deg/s or m/s^2; an increment table's samples over their own interval)."""
+    if policy == "off" or len(imu) < 5:
+        return imu, []
+    file, rows = _where(imu)
+    t = np.asarray(imu.index, float)
+    out = imu
+    spikes: list[dict] = []
+    for sensor, scale in (("gyro", np.degrees(1.0)), ("accel", 1.0)):
+        cols, x = sample_rates(imu, sensor)
+        if cols is None:
+            continue
+        k = find_spikes(x)
+        if not k.size:
+            continue
+        mid = 0.5 * (x[k - 1] + x[k + 1])
+        for i, kk in enumerate(k):
+            spikes.append({"time": float(t[kk]), "row": int(rows[kk]), "sensor": sensor,
+                           "value": float(np.linalg.norm(x[kk]) * scale),
+                           "neighbours": float(np.linalg.norm(mid[i]) * scale),
+                           "action": "bridged" if policy == "bridge" else "flagged"})
+        if policy == "bridge":
+            if out is imu:
+                out = imu.copy()
+                out.attrs = dict(imu.attrs)
+            vals = out[cols].to_numpy(float, copy=True)
+            vals[k] = mid if cols[0] in RATE_COLS else mid * _sample_intervals(imu)[k, None]
+            out[cols] = vals
+    if spikes:
+        first = min(spikes, key=lambda d: d["time"])
+        unit = "deg/s" if first["sensor"] == "gyro" else "m/s^2"
+        warn(f"{len(spikes)} single-sample IMU spike(s) "
+             f"({'replaced by the mean of their neighbours' if policy == 'bridge' else 'kept'}"
+             f"; inputs.imu.spike_policy = {policy!r}); the first at t = {first['time']:.6f} s: "
+             f"{first['sensor']} {first['value']:.4g} {unit} between neighbours of "
+             f"{first['neighbours']:.4g} {unit}", file=file, row=first["row"],
+             column="inputs.imu.spike_policy")
+    return out, sorted(spikes, key=lambda d: d["time"])
 
 
 #: moving-average length [s] that removes sensor noise and vibration from the rates before
@@ -177,7 +265,10 @@ def shift_report(report: dict, dt: float) -> dict:
     out["dropped_duplicates"] = [dict(d, time=d["time"] + dt)
                                  for d in report["dropped_duplicates"]]
     out["segments"] = [[a + dt, b + dt] for a, b in report["segments"]]
+    if "spikes" in report:
+        out["spikes"] = [dict(d, time=d["time"] + dt) for d in report["spikes"]]
     return out
 
 
-__all__ = ["check_imu_table", "gap_noise", "gap_policy", "shift_report"]
+__all__ = ["apply_spike_policy", "check_imu_table", "find_spikes", "gap_noise", "gap_policy",
+           "sample_rates", "shift_report"]

@@ -232,6 +232,12 @@ def summary_html(result, data: ReportData) -> str:
     counts = measurement_counts(s, data.innovations)
     if len(counts):
         parts.append("<h3>Measurements</h3>" + table_html(counts, left=("measurement",)))
+    if s.get("heading_reinitialisations"):
+        parts.append("<h3>Heading re-initialisations</h3>" + table_html(pd.DataFrame(
+            [{"time [s]": ev.get("time"), "old heading [deg]": ev.get("old_heading_deg"),
+              "new heading [deg]": ev.get("new_heading_deg"),
+              "sigma [deg]": ev.get("heading_std_deg"), "reason": ev.get("reason")}
+             for ev in s["heading_reinitialisations"]]), left=("reason",)))
     if s.get("aiding_warnings"):
         parts.append("<h3>Aiding warnings</h3>" + "".join(
             f"<p class='note'>{html.escape(str(w))}</p>" for w in s["aiding_warnings"]))

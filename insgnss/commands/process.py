@@ -88,6 +88,14 @@ def print_summary(res) -> None:
               f"{sum(g['missing'] for g in gaps)} samples missing), "
               f"{len(imu.get('dropped_duplicates') or [])} duplicated sample(s) dropped, "
               f"{len(imu.get('segments') or [1])} segment(s)")
+    for sp in imu.get("spikes") or []:
+        unit = "deg/s" if sp["sensor"] == "gyro" else "m/s^2"
+        print(f"IMU spike at t = {sp['time']:.3f} s (row {sp['row']}): {sp['sensor']} "
+              f"{sp['value']:.4g} {unit} between {sp['neighbours']:.4g} {unit}, {sp['action']}")
+    for ev in s.get("heading_reinitialisations") or []:
+        print(f"heading re-initialised at t = {ev['time']:.3f} s: {ev['old_heading_deg']:.1f} -> "
+              f"{ev['new_heading_deg']:.1f} deg (GNSS course, sigma "
+              f"{ev['heading_std_deg']:.1f} deg): {ev['reason']}")
     t = s["timing_s"]
     print(f"{s['job']}: {s['imu_samples']:,} IMU samples, filter {t.get('total', 0):.2f} s, "
           f"job {t.get('job_total', 0):.2f} s")

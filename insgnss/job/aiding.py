@@ -39,6 +39,7 @@ import pandas as pd
 
 from ..config import Job
 from ..errors import ConfigError, InputFormatError, NoUsableAidingError
+from ..filter.heading_reinit import CourseTrack
 from ..filter.measurements import (
     BodyVelocity,
     Cupt,
@@ -48,7 +49,6 @@ from ..filter.measurements import (
     Zaru,
     Zupt,
 )
-from ..filter.heading_reinit import CourseTrack
 from ..validate import check_gnss_in_imu_span, warn
 from .inputs import Inputs
 from .windows import describe_windows, outside_windows

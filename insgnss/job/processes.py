@@ -32,13 +32,14 @@ from dataclasses import replace
 import numpy as np
 
 from ..config import Job
-from ..errors import ConfigError, NoUsableAidingError
+from ..errors import ConfigError, FilterHealthError, NoUsableAidingError
 from ..filter.engine import FilterConfig, run_filter
+from ..filter.heading_reinit import HeadingReinit
+from ..filter.health import with_imu_note
 from ..imu import ImuErrorModel, coning_sculling, increments, increments_table
-from ..policies import gap_noise
+from ..policies import gap_noise, sample_rates
 from ..preprocess import with_static_noise
 from ..validate import warn
-from ..filter.heading_reinit import HeadingReinit
 from .aiding import (
     Aiding,
     applied_check,
@@ -114,6 +115,12 @@ def _filter_result(ctx: RunContext, init: Initialization, res, aiding: Aiding,
                    model: ImuErrorModel, n_imu: int, autotune: dict | None = None) -> JobResult:
     """Evaluate a finished filter run, check what it applied of each aiding source and build
     its :class:`JobResult` with the summary."""
+    if isinstance(res.error, FilterHealthError) and res.final is not None:
+        # name an IMU outlier that preceded the failure (insgnss.filter.health)
+        imu = ctx.inputs.imu
+        res.error = with_imu_note(res.error, imu.index.to_numpy(float),
+                                  sample_rates(imu, "gyro")[1], sample_rates(imu, "accel")[1],
+                                  float(res.final.time), ctx.job["filter"]["nis_window"] or 30.0)
     out = evaluate_result(JobResult(ctx.job, ctx.inputs, init, ctx.windows, res, model=model))
     counts = measurement_counts(aiding, res.innovations)
     out.failure, notes = applied_check(ctx.job, aiding, counts, res.innovations, res.complete)

@@ -10,7 +10,7 @@ from pathlib import Path
 
 from ..config import Job, check_job_against_data
 from ..errors import InvalidValueError
-from ..policies import check_imu_table, gap_policy, shift_report
+from ..policies import apply_spike_policy, check_imu_table, gap_policy, shift_report
 from ..preprocess import estimate_time_offset, estimate_velocity_lag, shift_time
 from ..validate import warn
 from .context import RunContext
@@ -41,6 +41,9 @@ def prepare(job: Job, *, progress: bool | None = None, seed: int | None = None,
     # duplicates, gaps and segments of the table actually processed (policies.py)
     inputs.imu, imu_report = check_imu_table(inputs.imu, gap_policy(job),
                                              job["inputs"]["imu"]["duplicates"])
+    inputs.imu, spikes = apply_spike_policy(inputs.imu, job["inputs"]["imu"]["spike_policy"])
+    if spikes:
+        imu_report["spikes"] = spikes
     check_job_against_data(job, imu_report["nominal_dt"],  # intervals, start time (config.py)
                            (float(inputs.imu.index[0]), float(inputs.imu.index[-1])))
     model = inputs.imu_model or imu_model(job, None)
