@@ -149,6 +149,7 @@ def run_segments(ctx: RunContext, run_one: SegmentRunner) -> JobResult:
         measurements=add_counts([r.summary["measurements"] for _, r in results]),
         aiding_warnings=[f"IMU segment {k}: {n}" for k, r in results
                          for n in r.summary.get("aiding_warnings", [])],
+        heading_reinitialisations=list(merged.heading_reinits),
         outages=[list(w) for w in windows], segments=info, imu=ctx.imu_report,
         preprocessing=dict(ctx.preprocessing),
         evaluation={k: v["summary"] for k, v in out.evaluation.items()})
@@ -193,7 +194,9 @@ def merge_filter_results(parts):
                    epoch_times=np.concatenate([f.epoch_times for f in fs]),
                    P_filtered=stack("P_filtered"), P_predicted=stack("P_predicted"),
                    feedback=stack("feedback"), P_smoothed=stack("P_smoothed"),
-                   params=stack("params"), final=fs[-1].final)
+                   params=stack("params"), final=fs[-1].final,
+                   heading_reinits=[dict(ev, segment=k) for k, f in parts
+                                    for ev in getattr(f, "heading_reinits", [])])
 
 
 __all__ = ["MIN_SEGMENT_SAMPLES", "merge_filter_results", "run_segments", "segment_job"]
