@@ -506,9 +506,9 @@ def foot_filter_arrays(t, dth, dv, gyro, still, stat, initial: NavState, bg0,
     if not res.complete:
         raise FilterHealthError(f"foot-mounted filter stopped: {res.error}",
                                 found=str(res.error))
-    fwd = res.forward.to_numpy()
+    fwd = res.forward_array
     nav = fwd[:, :9]
-    nav_s = res.smoothed.to_numpy()[:, :9] if res.smoothed is not None else nav
+    nav_s = res.smoothed_array[:, :9] if res.smoothed_table is not None else nav
     log = res.log
     nu = np.full((t.size, 6), np.nan)
     ok = log["accepted"]

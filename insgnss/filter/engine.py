@@ -60,7 +60,7 @@ from .models import BIAS_MODELS, ERROR_DYNAMICS, StateLayout
 from .process import ProcessModelBase
 from .schedule import build_schedule
 from .smoother import smooth
-from .store import InnovationLog, NodeStore, innovation_tables
+from .store import InnovationLog, NodeStore, Table, innovation_tables
 from .strapdown_model import DISCRETIZATIONS, STD_COLS, StrapdownModel, levelling_covariance
 
 __all__ = ["BIAS_COLS", "STD_COLS", "FilterConfig", "FilterResult", "run_filter", "run_engine",
@@ -253,6 +253,10 @@ class FilterResult:
         state (``gyro_bias_x .. accel_bias_z``, scale factors, extras) with a ``_std`` column.
     smoothed : DataFrame or None
         The same columns from the smoother (:mod:`.smoother`).
+    forward_array, smoothed_array : (N, C) arrays
+        Their values; the DataFrames (and the innovation tables) are built when first read,
+        so array callers do not pay for them (``forward_table``, ``smoothed_table``: the
+        :class:`.store.Table` or DataFrame the process model returned).
     innovations : DataFrame
         One row per measurement evaluated: ``time type label dof nis threshold accepted
         recovered`` and ``innov_k``, ``innov_std_k`` for each component (``label``: the row's
@@ -296,10 +300,8 @@ class FilterResult:
         ``e``), None without high-rate measurements.
     """
 
-    forward: pd.DataFrame
-    smoothed: pd.DataFrame | None
-    innovations: pd.DataFrame
-    rejected: pd.DataFrame
+    forward_table: Table | pd.DataFrame = field(repr=False)
+    smoothed_table: Table | pd.DataFrame | None = field(repr=False)
     complete: bool
     timing: dict
     layout: StateLayout
@@ -316,6 +318,56 @@ class FilterResult:
     high_rate: dict | None = field(default=None, repr=False)
     log: dict | None = field(default=None, repr=False)
     heading_reinits: list = field(default_factory=list)
+
+    # the tables are built on first access: array callers read forward_array / log
+    @property
+    def forward(self) -> pd.DataFrame:
+        return _frame(self.forward_table)
+
+    @forward.setter
+    def forward(self, table) -> None:
+        self.forward_table = table
+
+    @property
+    def smoothed(self) -> pd.DataFrame | None:
+        return _frame(self.smoothed_table)
+
+    @smoothed.setter
+    def smoothed(self, table) -> None:
+        self.smoothed_table = table
+
+    @property
+    def forward_array(self) -> np.ndarray:
+        """The values of :attr:`forward` (no DataFrame built)."""
+        return _values(self.forward_table)
+
+    @property
+    def smoothed_array(self) -> np.ndarray | None:
+        """The values of :attr:`smoothed` (no DataFrame built)."""
+        return _values(self.smoothed_table)
+
+    @property
+    def innovations(self) -> pd.DataFrame:
+        return self._innovation_tables()[0]
+
+    @property
+    def rejected(self) -> pd.DataFrame:
+        return self._innovation_tables()[1]
+
+    def _innovation_tables(self):
+        if "_innov" not in self.__dict__:
+            self.__dict__["_innov"] = innovation_tables(None, self.log)
+        return self.__dict__["_innov"]
+
+
+def _frame(table):
+    return table.frame() if isinstance(table, Table) else table
+
+
+def _values(table):
+    if table is None:
+        return None
+    return table.values if isinstance(table, Table) else table.to_numpy()
 
 
 class _Run:
@@ -639,7 +691,6 @@ def _finish(run: _Run, completed: int, error, t_start: float) -> FilterResult:
         smoothed = model.output(store, n_ok, n_rows, xs)
         timing["smoother"] = perf() - c0
     log = run.log.columns()
-    innovations, rejected = innovation_tables(run.log, log)
     log["names"] = list(run.log.names)
     log["labels"] = list(run.log.labels)
     timing["total"] = perf() - t_start
@@ -655,8 +706,8 @@ def _finish(run: _Run, completed: int, error, t_start: float) -> FilterResult:
                      "r1": store.hr_r1[:n_hr], "pattern": run.hr.pattern,
                      "Pp_index": store.hr_ppi[:n_hr], "Pp": store.hr_Pp}
     return FilterResult(
-        forward=forward, smoothed=smoothed, innovations=innovations, rejected=rejected,
-        complete=error is None, timing=timing, layout=model.layout,
+        forward_table=forward, smoothed_table=smoothed, complete=error is None,
+        timing=timing, layout=model.layout,
         epoch_times=store.t[:n_ok].copy(), P_filtered=store.Pf[:n_ok],
         P_predicted=store.Pp[:n_ok], feedback=store.fb[:n_ok], P_smoothed=Ps, error=error,
         final=model.final_state(float(t_last)), params=store.par[:n_ok], Phi=store.Phi[:n_ok],

@@ -48,7 +48,7 @@ from __future__ import annotations
 import numpy as np
 import pandas as pd
 
-__all__ = ["NodeStore", "InnovationLog", "innovation_tables"]
+__all__ = ["NodeStore", "InnovationLog", "Table", "innovation_tables"]
 
 
 class NodeStore:
@@ -209,14 +209,16 @@ class InnovationLog:
         return out
 
 
-def innovation_tables(log: InnovationLog, c: dict | None = None
+def innovation_tables(log: InnovationLog | None, c: dict | None = None
                       ) -> tuple[pd.DataFrame, pd.DataFrame]:
     """Innovation table (``time type label dof nis threshold accepted recovered innov_k
-    innov_std_k``) and its rejected rows (``c``: :meth:`InnovationLog.columns`, if at hand)."""
-    c = log.columns() if c is None else c
+    innov_std_k``) and its rejected rows (``c``: :meth:`InnovationLog.columns` with the
+    ``names`` and ``labels`` lists, or None to take them from ``log``)."""
+    if c is None:
+        c = dict(log.columns(), names=list(log.names), labels=list(log.labels))
     m = c["innov"].shape[1]
-    names = np.array(log.names + [""], dtype=object)
-    labels = np.array(log.labels, dtype=object)
+    names = np.array(list(c["names"]) + [""], dtype=object)
+    labels = np.array(c["labels"], dtype=object)
     cols = {"time": c["time"], "type": names[c["tid"].astype(np.int64)] if c["tid"].size
             else np.empty(0, object),
             "label": labels[c["lid"].astype(np.int64)] if c["lid"].size else np.empty(0, object),
@@ -231,3 +233,19 @@ def innovation_tables(log: InnovationLog, c: dict | None = None
     rejected = (innovations.iloc[np.flatnonzero(~acc)].reset_index(drop=True) if not acc.all()
                 else innovations.iloc[:0])
     return innovations, rejected
+
+
+class Table:
+    """An IMU-rate output table held as arrays (``time`` (N,), ``values`` (N, C), ``columns``):
+    the DataFrame is built on the first call of :meth:`frame`, so callers that read the arrays
+    (the foot-mounted INS, its threshold selection) never pay for it."""
+
+    def __init__(self, time: np.ndarray, values: np.ndarray, columns: list[str]):
+        self.time, self.values, self.columns = time, values, list(columns)
+        self._frame: pd.DataFrame | None = None
+
+    def frame(self) -> pd.DataFrame:
+        if self._frame is None:
+            self._frame = pd.DataFrame(self.values, index=pd.Index(self.time, name="time"),
+                                       columns=self.columns, copy=False)
+        return self._frame

@@ -41,6 +41,7 @@ from . import kernels
 from .measurements import NominalState
 from .models import ERROR_DYNAMICS, StateLayout, process_model
 from .process import ProcessModelBase
+from .store import Table
 
 __all__ = ["StrapdownModel", "STD_COLS", "output_columns", "levelling_covariance",
            "DISCRETIZATIONS"]
@@ -270,10 +271,11 @@ class StrapdownModel(ProcessModelBase):
             self.seg[j - 1], self.post[j - 1] = node, True
         self._nav_time = None
 
-    def output(self, store, n_nodes: int, n_rows: int, smoothed=None) -> pd.DataFrame:
+    def output(self, store, n_nodes: int, n_rows: int, smoothed=None) -> Table:
         """IMU-rate forward table (``smoothed=None``: completes the stored nominal table in
         place) or smoothed table (``(xs_plus, xs_minus, Ps or None, xs_hr)``: a new table; the
-        smoothed std columns are NaN without smoothed covariances)."""
+        smoothed std columns are NaN without smoothed covariances), as a :class:`.store.Table`
+        (arrays; its DataFrame is built when asked for)."""
         cols = output_columns(self.layout)
         t = self.t
         n_hr = store.hr_count
@@ -296,8 +298,7 @@ class StrapdownModel(ProcessModelBase):
                 if Ps is None:
                     out[:, 9:18] = np.nan
                     out[:, 18 + self.n_par:] = np.nan
-        return pd.DataFrame(out[:n_rows], index=pd.Index(t[:n_rows], name="time"), columns=cols,
-                            copy=False)
+        return Table(t[:n_rows], out[:n_rows], cols)
 
     def final_state(self, time: float) -> NavState:
         return NavState(self.pos[0], self.pos[1], self.pos[2], self.vel.copy(), self.C.copy(),
