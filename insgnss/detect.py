@@ -321,12 +321,26 @@ def _quantile_sorted(buf, m, q):
 
 
 @njit(cache=True)
+def _quantile_select(buf, m, q):
+    """:func:`_quantile_sorted` of the first ``m`` (unsorted) entries of ``buf`` by selection
+    (the two order statistics it needs, in O(m) instead of a sort)."""
+    pos = q * (m - 1)
+    i = int(np.floor(pos))
+    if i >= m - 1:
+        return np.max(buf[:m])
+    part = np.partition(buf[:m], i)
+    lo = part[i]
+    hi = np.min(part[i + 1:])
+    return lo + (pos - i) * (hi - lo)
+
+
+@njit(cache=True)
 def running_quantile(x, half, q, step):
     """``q``-quantile of the finite values of ``x`` over ``[k - half, k + half]``.
 
     Evaluated exactly at every ``step``-th sample (and the last) and interpolated linearly in
     between (the level it is used for varies over a stride, not a sample); NaN where the window
-    holds no finite value. Cost ``O(N / step * W log W)``.
+    holds no finite value. Cost ``O(N / step * W)``.
     """
     n = x.shape[0]
     out = np.empty(n)
@@ -345,8 +359,7 @@ def running_quantile(x, half, q, step):
         if m == 0:
             val[j] = np.nan
         else:
-            buf[:m] = np.sort(buf[:m])
-            val[j] = _quantile_sorted(buf, m, q)
+            val[j] = _quantile_select(buf, m, q)
     for j in range(nodes.size - 1):
         a, b = nodes[j], nodes[j + 1]
         va, vb = val[j], val[j + 1]
@@ -820,10 +833,15 @@ def select_threshold(t, stat, config: DetectorConfig, forward, fixed=SELECTION_F
     t = np.asarray(t, float)
     rows = []
     best = None
+    seen: dict[bytes, float] = {}  # candidates that give the same decisions: one filter run
     for family, value, thr in threshold_candidates(t, stat, config, fixed, relative):
         still = decide(t, stat, thr, config)
         n_st = int(np.count_nonzero(np.diff(np.concatenate([[0], still.astype(np.int8)])) == 1))
-        j = stance_entry_rms(forward(still), still, min_stances) if still.any() else np.inf
+        key_still = np.packbits(still).tobytes()
+        j = seen.get(key_still)
+        if j is None:
+            j = stance_entry_rms(forward(still), still, min_stances) if still.any() else np.inf
+            seen[key_still] = j
         rows.append({"family": family, "log10": value, "criterion": j, "stances": n_st})
         key = (j, -n_st)
         if best is None or key < best[0]:
