@@ -115,6 +115,7 @@ from dataclasses import asdict, dataclass, fields
 import numpy as np
 import pandas as pd
 from numba import njit
+from scipy.fft import next_fast_len
 
 from .errors import ConfigError
 from .imu import ACCEL_COLS, DTHETA_COLS, DV_COLS, GYRO_COLS, is_increment_table
@@ -387,8 +388,9 @@ def gait_period(stat: np.ndarray, dt: float, shortest: float = 0.4, longest: flo
     if n < 4 or b - a < 3:
         return float("nan")
     x = x - x.mean()
-    f = np.fft.rfft(x, 2 * n)
-    ac = np.fft.irfft(f * np.conj(f))[:n]
+    nfft = next_fast_len(2 * n - 1)  # linear (not circular) autocorrelation at lags < n
+    f = np.fft.rfft(x, nfft)
+    ac = np.fft.irfft(f * np.conj(f), nfft)[:n]
     if not ac[0] > 0:
         return float("nan")
     seg = ac[a:b + 1] / ac[0]
