@@ -40,6 +40,33 @@ def move_point(traj: pd.DataFrame, lever_arm) -> pd.DataFrame:
     return out
 
 
+#: reference epochs per block of :func:`position_errors`
+_BLOCK = 1 << 16
+
+
+def _position_errors_block(ts, tr, sol, ref, max_gap: float) -> np.ndarray:
+    """ENU errors (N, 3) at the reference epochs ``tr`` (geodetic ``ref``) of the solution at
+    ``ts`` (geodetic columns ``sol``), interpolated linearly in ECEF between the bracketing
+    samples (only those are converted); NaN where not covered."""
+    j = np.searchsorted(ts, tr, side="right")
+    ok = (j > 0) & (j < ts.size)
+    jj = np.clip(j, 1, ts.size - 1)
+    t0, t1 = ts[jj - 1], ts[jj]
+    ok &= (t1 - t0) <= max_gap
+    jprev = np.clip(j - 1, 0, ts.size - 1)
+    exact = np.isclose(ts[jprev], tr, atol=1e-4, rtol=0)
+    w = np.where(t1 > t0, (tr - t0) / np.where(t1 > t0, t1 - t0, 1.0), 0.0)
+    x0 = np.column_stack(geodetic_to_ecef(*(c[jj - 1] for c in sol)))
+    x1 = np.column_stack(geodetic_to_ecef(*(c[jj] for c in sol)))
+    xi = x0 + w[:, None] * (x1 - x0)
+    snap = ~ok & exact
+    xi[snap] = np.column_stack(geodetic_to_ecef(*(c[jprev[snap]] for c in sol)))
+    ok |= exact
+    enu = ecef_to_enu_vectors(xi - np.column_stack(geodetic_to_ecef(*ref)), ref[0], ref[1])
+    enu[~ok] = np.nan
+    return enu
+
+
 def position_errors(solution: pd.DataFrame, reference: pd.DataFrame, *,
                     max_gap: float = 0.5) -> pd.DataFrame:
     """ENU position error (solution - reference) [m] at the reference epochs.
@@ -49,25 +76,13 @@ def position_errors(solution: pd.DataFrame, reference: pd.DataFrame, *,
     """
     ts = solution.index.to_numpy(float)
     tr = reference.index.to_numpy(float)
-    xs = np.column_stack(geodetic_to_ecef(solution["lat"].to_numpy(), solution["lon"].to_numpy(),
-                                          solution["height"].to_numpy()))
-    xr = np.column_stack(geodetic_to_ecef(reference["lat"].to_numpy(),
-                                          reference["lon"].to_numpy(),
-                                          reference["height"].to_numpy()))
-    j = np.searchsorted(ts, tr, side="right")
-    ok = (j > 0) & (j < ts.size)
-    jj = np.clip(j, 1, ts.size - 1)
-    t0, t1 = ts[jj - 1], ts[jj]
-    ok &= (t1 - t0) <= max_gap
-    exact = np.isclose(ts[np.clip(j - 1, 0, ts.size - 1)], tr, atol=1e-4, rtol=0)
-    w = np.where(t1 > t0, (tr - t0) / np.where(t1 > t0, t1 - t0, 1.0), 0.0)
-    xi = xs[jj - 1] + w[:, None] * (xs[jj] - xs[jj - 1])
-    xi[~ok & exact] = xs[np.clip(j - 1, 0, ts.size - 1)][~ok & exact]
-    ok |= exact
-    d = xi - xr
-    lat, lon = reference["lat"].to_numpy(), reference["lon"].to_numpy()
-    enu = ecef_to_enu_vectors(d, lat, lon)
-    enu[~ok] = np.nan
+    sol = [solution[c].to_numpy() for c in ("lat", "lon", "height")]
+    ref = [reference[c].to_numpy() for c in ("lat", "lon", "height")]
+    enu = np.empty((tr.size, 3))
+    # blocks of reference epochs: the temporaries stay small on long logs (same numbers)
+    for a in range(0, tr.size, _BLOCK):
+        b = min(a + _BLOCK, tr.size)
+        enu[a:b] = _position_errors_block(ts, tr[a:b], sol, [r[a:b] for r in ref], max_gap)
     out = pd.DataFrame(enu, index=reference.index, columns=["east", "north", "up"])
     out["horizontal"] = np.hypot(out["east"], out["north"])
     return out

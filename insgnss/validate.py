@@ -327,6 +327,10 @@ def _clean_rows(path: Path, comment, header, delimiter, trim) -> TextRows | None
     values = np.empty((n_fields, n)).T  # column-major: each column one contiguous copy
     for j, col in enumerate(tab.columns):
         values[:, j] = (col.fill_null(np.nan) if nulls[j] else col).to_numpy()
+    del tab
+    # pyarrow's memory pool keeps the freed parse buffers (about the size of the file) for
+    # reuse; a long log's peak memory is better without them
+    pa.default_memory_pool().release_unused()
     if b"(" in data and np.isnan(values).any():
         return None  # "nan(...)" is a NaN for pyarrow, not a number for numpy
     lines = _LazyLines(path, comment, header, trim, first, n)

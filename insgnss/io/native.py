@@ -91,13 +91,21 @@ def to_file_columns(df: pd.DataFrame) -> pd.DataFrame:
     return out.rename(columns=_file_names(out.columns))
 
 
+def file_columns_back(names) -> list[str]:
+    """The names inside of file column names: ``*_deg`` of an angle column without the suffix
+    (its values are degrees in the file, radians inside); the others unchanged."""
+    back = {f"{c}_deg": c for c in ANGLE_COLUMNS}
+    return [back.get(c, c) for c in names]
+
+
 def from_file_columns(df: pd.DataFrame) -> pd.DataFrame:
     """Inverse of :func:`to_file_columns`: ``*_deg`` columns in radians without the suffix."""
-    back = {f"{c}_deg": c for c in ANGLE_COLUMNS if f"{c}_deg" in df.columns}
+    names = file_columns_back(df.columns)
+    back = [n for n, c in zip(names, df.columns, strict=True) if n != c]
     if not back:
         return df
-    out = df.rename(columns=back)
-    for c in back.values():
+    out = df.set_axis(names, axis=1)
+    for c in back:
         out[c] = np.radians(out[c].to_numpy(float))
     return out
 

@@ -48,7 +48,7 @@ from ..validate import (
     read_rows,
 )
 from .gpstime import to_gps_seconds
-from .native import atomic_write, csv_writer, from_file_columns, to_file_columns
+from .native import atomic_write, csv_writer, file_columns_back, to_file_columns
 
 KML_NS = "http://www.opengis.net/kml/2.2"
 GX_NS = "http://www.google.com/kml/ext/2.2"
@@ -123,8 +123,14 @@ def read_trajectory_csv(path: str | os.PathLike, *, required: Sequence[str] = ("
     keep, dropped = check_time_order(v[:, 0], rows.line_no, path, duplicates=duplicates)
     if not keep.all():
         v = v[keep]
-    df = pd.DataFrame(v[:, 1:], index=pd.Index(v[:, 0], name="time"), columns=head[1:])
-    df = from_file_columns(df)
+    # angle columns to radians in place (file_columns_back), then one table on the parsed
+    # values without a copy (pandas copies a 2-D array by default)
+    names = file_columns_back(head)
+    for i, c in enumerate(head):
+        if names[i] != c:
+            v[:, i] = np.radians(v[:, i])
+    df = pd.DataFrame(v[:, 1:], index=pd.Index(v[:, 0], name="time"), columns=names[1:],
+                      copy=False)
     return finish_attrs(df, file=path, fmt="native", time_base="unspecified",
                         line_no=rows.line_no[keep], dropped_duplicates=dropped)
 
