@@ -50,7 +50,8 @@ def run(args: argparse.Namespace) -> int:
         job.settings["outputs"]["report"] = False
     out = args.output or job.output_dir
     with output_folder(args, out, protect=job.input_paths(), names=output_names()):
-        res = run_job(job, progress=False if args.no_progress else None, seed=args.seed)
+        res = run_job(job, progress=False if args.no_progress else None, seed=args.seed,
+                      spill_dir=out)
         paths = write_outputs(res, out)
     print_summary(res)
     print(f"wrote {len(paths)} files to {out}")

@@ -43,6 +43,7 @@ it and returns what was computed up to the last good node with ``complete=False`
 from __future__ import annotations
 
 import time as _time
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -174,6 +175,10 @@ class FilterConfig:
         Re-initialise the heading of a land vehicle from the GNSS course when it disagrees
         with it while the GNSS innovations run away (:mod:`.heading_reinit`; LLF strapdown
         model only); ``None``: never.
+    store_allocate : callable or None
+        ``allocate(shape, dtype)`` for the large arrays of the smoother's node store
+        (:class:`.store.NodeStore`); None: in memory. A job passes
+        :class:`insgnss.io.spill.SpillAllocator` (``[filter] store_memory_mb``).
     """
 
     imu_model: ImuErrorModel | str = "tactical"
@@ -210,6 +215,7 @@ class FilterConfig:
     gyro_dynamic_noise: float = 0.0
     smoother_covariance: bool = True
     heading_reinit: HeadingReinit | None = None
+    store_allocate: Callable | None = None
 
     def validate(self) -> None:
         if self.bias_model not in BIAS_MODELS:
@@ -411,7 +417,8 @@ class _Run:
         pat = self.hr.pattern if self.hr is not None else None
         self.store = NodeStore(self.sched.n_epochs, n, model.n_par, self.sched.dense_samples,
                                0 if pat is None else pat[1].size,
-                               0 if pat is None else pat[3].size)
+                               0 if pat is None else pat[3].size,
+                               allocate=config.store_allocate)
         if config.extra_noise is not None and len(config.extra_noise):
             xn = config.extra_noise.reindex(columns=list(EXTRA_NOISE_COLS)).fillna(0.0)
             self.xn_t = np.asarray(xn.index, float)

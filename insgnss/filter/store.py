@@ -53,17 +53,24 @@ __all__ = ["NodeStore", "InnovationLog", "Table", "innovation_tables"]
 
 class NodeStore:
     """Preallocated node arrays (capacity ``cap``), the high-rate samples (capacity
-    ``cap_hr``; F and Qd at ``nnz`` and ``nq`` pattern entries) and growable update rows."""
+    ``cap_hr``; F and Qd at ``nnz`` and ``nq`` pattern entries) and growable update rows.
+
+    ``allocate(shape, dtype)`` makes the large arrays (covariances, transitions, update
+    rows, high-rate samples; default :func:`numpy.empty`): a job passes
+    :class:`insgnss.io.spill.SpillAllocator`, which maps them to a file beyond a memory
+    limit (``[filter] store_memory_mb``)."""
 
     def __init__(self, cap: int, n: int, n_par: int, cap_hr: int = 0, nnz: int = 0,
-                 nq: int = 0, rows: int = 64):
+                 nq: int = 0, rows: int = 64, allocate=None):
         self.n = n
+        self._allocate = alloc = np.empty if allocate is None else allocate
         self.t = np.empty(cap)
-        self.Pf = np.empty((cap, n, n))
-        self.Pp = np.empty((cap, n, n))
-        self.Phi = np.empty((cap, n, n))
-        self.fb = np.zeros((cap, n))
-        self.par = np.empty((cap, n_par))
+        self.Pf = alloc((cap, n, n), float)
+        self.Pp = alloc((cap, n, n), float)
+        self.Phi = alloc((cap, n, n), float)
+        self.fb = alloc((cap, n), float)
+        self.fb[:] = 0.0
+        self.par = alloc((cap, n_par), float)
         self.r0 = np.zeros(cap, np.int64)  # update rows of node k: r0[k] .. r1[k]-1
         self.r1 = np.zeros(cap, np.int64)
         self.seg0 = np.zeros(cap, np.int64)  # high-rate samples before node k: seg0 .. seg1-1
@@ -71,9 +78,9 @@ class NodeStore:
         self.count = 0  # nodes written
         self.hr_t = np.empty(cap_hr)
         self.hr_row = np.empty(cap_hr, np.int64)
-        self.hr_F = np.empty((cap_hr, nnz))
-        self.hr_Q = np.empty((cap_hr, nq))
-        self.hr_fb = np.empty((cap_hr, n))
+        self.hr_F = alloc((cap_hr, nnz), float)
+        self.hr_Q = alloc((cap_hr, nq), float)
+        self.hr_fb = alloc((cap_hr, n), float)
         self.hr_r0 = np.zeros(cap_hr, np.int64)
         self.hr_r1 = np.zeros(cap_hr, np.int64)
         self.hr_ppi = np.full(cap_hr, -1, np.int64)  # gate recovery: index into hr_Pp
@@ -85,7 +92,9 @@ class NodeStore:
     def _alloc_rows(self, cap):
         n = self.n
         old = getattr(self, "H", None)
-        H, K, G, s = np.empty((cap, n)), np.empty((cap, n)), np.empty((cap, n)), np.empty(cap)
+        alloc = self._allocate
+        H, K, G, s = (alloc((cap, n), float), alloc((cap, n), float), alloc((cap, n), float),
+                      alloc((cap,), float))
         if old is not None:
             r = self.n_rows
             H[:r], K[:r], G[:r], s[:r] = self.H[:r], self.K[:r], self.G[:r], self.s[:r]

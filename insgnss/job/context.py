@@ -5,6 +5,7 @@ IMU model, the outage windows and what the preparation did."""
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from pathlib import Path
 
 from ..config import Job
 from ..imu import ImuErrorModel
@@ -35,6 +36,9 @@ class RunContext:
         Seconds spent before the process (``read``).
     progress : bool
         Show a progress bar.
+    spill_dir : Path or None
+        Where the smoother's node store is memory-mapped beyond ``filter.store_memory_mb``
+        (None: the system's temporary folder).
     """
 
     job: Job
@@ -46,6 +50,7 @@ class RunContext:
     preprocessing: dict = field(default_factory=dict)
     timing: dict = field(default_factory=dict)
     progress: bool = False
+    spill_dir: Path | None = None
 
 
 __all__ = ["RunContext"]

@@ -37,6 +37,7 @@ from ..filter.engine import FilterConfig, run_filter
 from ..filter.heading_reinit import HeadingReinit
 from ..filter.health import with_imu_note
 from ..imu import ImuErrorModel, coning_sculling, increments, increments_table
+from ..io.spill import SpillAllocator
 from ..policies import gap_noise, sample_rates
 from ..preprocess import with_static_noise
 from ..validate import warn
@@ -56,11 +57,15 @@ from .summary import filter_summary, initialization_summary, job_name, platform_
 from .tuning import Tuned, apply, autotune
 
 
-def filter_config(job: Job, model: ImuErrorModel, init: Initialization) -> FilterConfig:
+def filter_config(job: Job, model: ImuErrorModel, init: Initialization,
+                  spill_dir=None) -> FilterConfig:
     """The engine's :class:`~insgnss.filter.engine.FilterConfig` from ``[filter]`` and the
-    initialization's sigmas."""
+    initialization's sigmas; the smoother's node store beyond ``filter.store_memory_mb`` is
+    memory-mapped in ``spill_dir`` (default: the system's temporary folder,
+    :mod:`insgnss.io.spill`)."""
     f = job["filter"]
     return FilterConfig(
+        store_allocate=SpillAllocator(f["store_memory_mb"] * 2.0**20, spill_dir),
         imu_model=model, bias_model=f["bias_model"], scale_factors=f["scale_factors"],
         propagation_interval=f["propagation_interval"], epoch_interval=f["epoch_interval"],
         discretization=f["discretization"], gate_probability=f["gate_probability"] or None,
@@ -131,20 +136,23 @@ def _filter_result(ctx: RunContext, init: Initialization, res, aiding: Aiding,
     return out
 
 
-def _strapdown_filter(ctx: RunContext, tuned: Tuned, smoother: bool = True):
-    """Initialize, build the aiding and run the strapdown filter for a (tuned) job:
+def _strapdown_filter(ctx: RunContext, tuned: Tuned, smoother: bool = True,
+                      init: Initialization | None = None):
+    """Initialize (unless ``init``, the initialization of this job, inputs, model and windows,
+    is given), build the aiding and run the strapdown filter for a (tuned) job:
     ``(filter result, initialization, aiding, IMU table)``. ``smoother=False`` is a run of the
     self-tuning: no smoother, no progress bar, no innovation gate and no runaway-NIS stop (a
     candidate noise model that fits badly is judged by its likelihood - robust to outliers,
     :mod:`insgnss.autotune` - not stopped or cut off by the gate, which would make the
     likelihood jump between nearby candidates)."""
     job, inputs, model = tuned.job, tuned.inputs, tuned.model
-    init = initialize(job, inputs, model, tuned.windows)
+    if init is None:
+        init = initialize(job, inputs, model, tuned.windows)
     imu = inputs.imu.loc[init.state.time:]
     aiding = build_aiding(job, inputs, tuned.windows, imu, _static_window(inputs, init))
     _record_still_threshold(ctx, aiding)
     aiding.require()
-    cfg = filter_config(job, model, init)
+    cfg = filter_config(job, model, init, ctx.spill_dir)
     cfg.smoother = cfg.smoother and smoother
     if not smoother:  # a self-tuning run: the likelihood judges the model, not the gate
         cfg.nis_window = None
@@ -182,6 +190,7 @@ def run_strapdown(ctx: RunContext) -> JobResult:
     job, inputs, model = ctx.job, ctx.inputs, ctx.model
     check_aiding(job, inputs, ctx.windows)
     init = initialize(job, inputs, model, ctx.windows)
+    first = model
     model = static_noise_model(ctx, init, model)
     tuned = Tuned(job, inputs, model, list(ctx.windows))
     tune_result = None
@@ -192,7 +201,10 @@ def run_strapdown(ctx: RunContext) -> JobResult:
                 ctx, model, lambda t: _strapdown_filter(ctx, t, False)[0],
                 lambda t: build_aiding(t.job, t.inputs, t.windows, t.inputs.imu))
         tuned = apply(ctx, model, theta)
-    res, init, aiding, imu = _strapdown_filter(ctx, tuned)
+    # the same job, inputs, IMU model and windows: the same initialization (the static-window
+    # search over the whole log is not repeated)
+    same = tuned.job is job and tuned.inputs is inputs and tuned.model is first
+    res, init, aiding, imu = _strapdown_filter(ctx, tuned, init=init if same else None)
     if tune_result is not None:
         ctx = replace(ctx, job=tuned.job, inputs=tuned.inputs)
     return _filter_result(ctx, init, res, aiding, tuned.model, len(imu),
@@ -247,7 +259,7 @@ def run_riss(ctx: RunContext) -> JobResult:
     aiding = build_aiding(job, inputs, ctx.windows, imu, _static_window(inputs, init))
     _record_still_threshold(ctx, aiding)
     aiding.require()
-    cfg = filter_config(job, model, init)
+    cfg = filter_config(job, model, init, ctx.spill_dir)
     # aiding.odometer_std is the odometer speed noise; filter.scale_factors estimates the
     # vertical gyro scale factor
     rcfg = riss_model.RissConfig(odometer_speed_std=float(job["aiding"]["odometer_std"]),

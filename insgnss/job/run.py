@@ -25,12 +25,14 @@ from .windows import outage_windows
 
 
 def prepare(job: Job, *, progress: bool | None = None, seed: int | None = None,
-            inputs: Inputs | None = None) -> RunContext:
+            inputs: Inputs | None = None, spill_dir: str | Path | None = None) -> RunContext:
     """Read the inputs (unless given) and prepare them for a process: the IMU table policies
     (:func:`insgnss.policies.check_imu_table`), the outage windows and, when asked, the
     estimated IMU-GNSS time offset (``inputs.imu.estimate_time_offset``) and GNSS velocity lag
     (``inputs.gnss.estimate_velocity_lag``, kept in ``inputs.gnss.attrs["velocity_lag"]``).
-    ``inputs.imu`` is replaced by the prepared table."""
+    ``inputs.imu`` is replaced by the prepared table. ``spill_dir``: where the smoother's
+    node store is memory-mapped beyond ``filter.store_memory_mb`` (default: the system's
+    temporary folder)."""
     t_start = time.perf_counter()
     inputs = load_inputs(job, seed) if inputs is None else inputs
     t_read = time.perf_counter() - t_start
@@ -67,7 +69,8 @@ def prepare(job: Job, *, progress: bool | None = None, seed: int | None = None,
     show = job["outputs"]["progress"] if progress is None else progress
     return RunContext(job=job, inputs=inputs, model=model, windows=windows,
                       imu_report=imu_report, t_start=t_start, preprocessing=preprocessing,
-                      timing={"read": t_read}, progress=bool(show))
+                      timing={"read": t_read}, progress=bool(show),
+                      spill_dir=None if spill_dir is None else Path(spill_dir))
 
 
 def _time_offset(job: Job, inputs: Inputs, windows) -> tuple[float, dict]:
@@ -88,12 +91,14 @@ def _time_offset(job: Job, inputs: Inputs, windows) -> tuple[float, dict]:
 
 
 def run_job(job: Job, *, progress: bool | None = None, seed: int | None = None,
-            inputs: Inputs | None = None) -> JobResult:
-    """Run a validated job in memory (no files written)."""
-    ctx = prepare(job, progress=progress, seed=seed, inputs=inputs)
+            inputs: Inputs | None = None, spill_dir: str | Path | None = None) -> JobResult:
+    """Run a validated job in memory (no result files written; beyond ``filter.
+    store_memory_mb`` the smoother's node store is memory-mapped in ``spill_dir``, default
+    the system's temporary folder, :mod:`insgnss.io.spill`)."""
+    ctx = prepare(job, progress=progress, seed=seed, inputs=inputs, spill_dir=spill_dir)
     if len(ctx.imu_report["segments"]) > 1:  # gap_policy = "split" and long gaps
         res = run_segments(ctx, lambda seg_job, seg_inputs: run_job(
-            seg_job, progress=progress, inputs=seg_inputs))
+            seg_job, progress=progress, inputs=seg_inputs, spill_dir=spill_dir))
     else:
         res = run_process(ctx)
     res.summary.update(provenance(job))  # version, resolved job, input checksums
@@ -103,7 +108,7 @@ def run_job(job: Job, *, progress: bool | None = None, seed: int | None = None,
 def process(job: Job, out_dir: str | Path | None = None, *, progress: bool | None = None
             ) -> tuple[JobResult, dict[str, Path]]:
     """Run a job and write its outputs; returns the result and the written paths by name."""
-    res = run_job(job, progress=progress)
+    res = run_job(job, progress=progress, spill_dir=out_dir)
     return res, write_outputs(res, out_dir)
 
 
