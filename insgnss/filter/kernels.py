@@ -128,10 +128,15 @@ def interval_step(pos, vel, C, pnom, dth_j, dv_j, a, dt_s, i_sg, i_sa, gravity_m
                 Qa[c, r] += qa * dt_s
         Qg[r, r] += vg_dyn
         Qa[r, r] += va_dyn
+    # a typed (not literal) False: the step's compiled version with a run-time flag, shared
+    # with the free mechanization, instead of a second specialisation for the constant
+    fix_height = np.bool_(False)
     if Cne is None:
-        strapdown_step(pos, vel, C, dthc, dvc, dt_s, gravity_model, attitude_update, False, work)
+        strapdown_step(pos, vel, C, dthc, dvc, dt_s, gravity_model, attitude_update, fix_height,
+                       work)
     else:
-        wander_step(Cne, hv, vel, C, dthc, dvc, dt_s, gravity_model, attitude_update, False, work)
+        wander_step(Cne, hv, vel, C, dthc, dvc, dt_s, gravity_model, attitude_update, fix_height,
+                    work)
 
 
 @njit(cache=True)

@@ -194,9 +194,21 @@ def _hr_forward(x, h0, h1, hr_F, hr_Q, hr_fb, hr_ppi, hr_Pp, LT, f_ptr, f_col, f
 
 
 @njit(cache=True)
+def _mbf_backward15(Pf, Phi, fb, r0, r1, H, K, G, s, n_nodes, seg0, seg1, n_hr, hr_F, hr_Q,
+                    hr_fb, hr_r0, hr_r1, hr_ppi, hr_Pp, f_ptr, f_col, f_act, q_row, q_col,
+                    covariance, xs_plus, xs_minus, Ps, xs_hr):
+    """:func:`mbf_backward` of the 15-state model with the dimension a compile-time constant,
+    so that LLVM unrolls the per-sample loops (a separate entry point: a job compiles only the
+    specialisation it runs, :func:`smooth` picks it)."""
+    mbf_backward(Pf, Phi, fb, r0, r1, H, K, G, s, n_nodes, seg0, seg1, n_hr, hr_F, hr_Q, hr_fb,
+                 hr_r0, hr_r1, hr_ppi, hr_Pp, f_ptr, f_col, f_act, q_row, q_col, covariance,
+                 xs_plus, xs_minus, Ps, xs_hr, 15)
+
+
+@njit(cache=True)
 def mbf_backward(Pf, Phi, fb, r0, r1, H, K, G, s, n_nodes, seg0, seg1, n_hr, hr_F, hr_Q,
                  hr_fb, hr_r0, hr_r1, hr_ppi, hr_Pp, f_ptr, f_col, f_act, q_row, q_col,
-                 covariance, xs_plus, xs_minus, Ps, xs_hr):
+                 covariance, xs_plus, xs_minus, Ps, xs_hr, n):
     """Modified Bryson-Frazier backward pass (module docstring) over the nodes
     ``0 .. n_nodes-1`` and the high-rate samples ``0 .. n_hr-1`` of a
     :class:`~insgnss.filter.store.NodeStore`.
@@ -207,9 +219,9 @@ def mbf_backward(Pf, Phi, fb, r0, r1, H, K, G, s, n_nodes, seg0, seg1, n_hr, hr_
     ``xs_minus(i) = Phi_i xs_plus(i-1) - Qd_i lambda~_i`` (from ``P(i|i-1) = Phi_i P(i-1|i-1)
     Phi_i^T + Qd_i``; at a sample whose ``P(i|i-1)`` a gate recovery inflated, stored in
     ``hr_Pp``: ``xs_minus(i) = -P(i|i-1) lambda~_i``), ``xs_plus(i) = xs_minus(i) - fb(i)``,
-    into ``xs_hr`` (n_hr, n).
+    into ``xs_hr`` (n_hr, n). ``n`` is the state dimension ``Pf.shape[1]`` (a compile-time
+    constant when called from :func:`_mbf_backward15`).
     """
-    n = Pf.shape[1]
     lam = np.zeros(n)
     lt = np.empty(n)
     Lam = np.zeros((n, n))
@@ -254,23 +266,15 @@ def mbf_backward(Pf, Phi, fb, r0, r1, H, K, G, s, n_nodes, seg0, seg1, n_hr, hr_
         if pend1 > pend0:  # rebuild the smoothed errors of the segment after node k
             for i in range(n):
                 x[i] = xs_plus[k, i]
-            if n == 15:  # a constant dimension lets LLVM unroll the per-sample loops
-                _hr_forward(x, pend0, pend1, hr_F, hr_Q, hr_fb, hr_ppi, hr_Pp, LT, f_ptr,
-                            f_col, f_act, q_row, q_col, xs_hr, xm, 15)
-            else:
-                _hr_forward(x, pend0, pend1, hr_F, hr_Q, hr_fb, hr_ppi, hr_Pp, LT, f_ptr,
-                            f_col, f_act, q_row, q_col, xs_hr, xm, n)
+            _hr_forward(x, pend0, pend1, hr_F, hr_Q, hr_fb, hr_ppi, hr_Pp, LT, f_ptr,
+                        f_col, f_act, q_row, q_col, xs_hr, xm, n)
             pend0, pend1 = 0, 0
-        _through_update(lam, lt, Lam, Lt, H, K, G, s, r0[k], r1[k], covariance, KL, W)
+        _through_update(lam, lt, Lam, Lt, H, K, G, s, r0[k], r1[k], covariance, KL, W, n)
         if k > 0:
             _back_through_dense(lam, lt, Lam, Lt, Phi[k], covariance, T1)
             if seg1[k] > seg0[k]:  # the high-rate samples between node k-1 and k
-                if n == 15:
-                    _hr_backward(seg0[k], seg1[k], lam, lt, Lam, Lt, H, K, G, s, hr_r0, hr_r1,
-                                 hr_F, f_ptr, f_col, f_act, covariance, KL, W, T1, LT, 15)
-                else:
-                    _hr_backward(seg0[k], seg1[k], lam, lt, Lam, Lt, H, K, G, s, hr_r0, hr_r1,
-                                 hr_F, f_ptr, f_col, f_act, covariance, KL, W, T1, LT, n)
+                _hr_backward(seg0[k], seg1[k], lam, lt, Lam, Lt, H, K, G, s, hr_r0, hr_r1,
+                             hr_F, f_ptr, f_col, f_act, covariance, KL, W, T1, LT, n)
                 pend0, pend1 = seg0[k], seg1[k]
 
 
@@ -288,10 +292,14 @@ def smooth(store, n_nodes: int, covariance: bool = True, pattern=None):
     if pattern is None:
         e = np.zeros(0, np.int64)
         pattern = (np.zeros(1, np.int64), e, e, e, e)
-    mbf_backward(store.Pf, store.Phi, store.fb, store.r0, store.r1, store.H, store.K, store.G,
-                 store.s, n_nodes, store.seg0, store.seg1, n_hr, store.hr_F, store.hr_Q,
-                 store.hr_fb, store.hr_r0, store.hr_r1, store.hr_ppi, store.hr_Pp, *pattern,
-                 bool(covariance), xs_plus, xs_minus, Ps, xs_hr)
+    args = (store.Pf, store.Phi, store.fb, store.r0, store.r1, store.H, store.K, store.G,
+            store.s, n_nodes, store.seg0, store.seg1, n_hr, store.hr_F, store.hr_Q, store.hr_fb,
+            store.hr_r0, store.hr_r1, store.hr_ppi, store.hr_Pp, *pattern, bool(covariance),
+            xs_plus, xs_minus, Ps, xs_hr)
+    if n == 15:
+        _mbf_backward15(*args)
+    else:
+        mbf_backward(*args, n)
     return xs_plus, xs_minus, (Ps if covariance else None), xs_hr
 
 
