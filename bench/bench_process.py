@@ -20,7 +20,11 @@ Data sets:
   written once with ``insgnss simulate`` into ``--data`` (reused when present) and processed
   from its files with a job written beside them (native CSV inputs, truth as reference);
 - ``drive``: the real car drive ``scenarios/drive_0708.toml`` (55k samples at 100 Hz, RTK,
-  11 outages), skipped when the shared data is absent.
+  11 outages), skipped when the shared data is absent. The ``car`` profile estimates the noise
+  by maximum likelihood first (``filter.autotune``: about 200 forward filter runs, minutes);
+  ``--no-autotune`` runs a copy of the job with ``filter.autotune = false`` (one filter and
+  smoother run with the profile's noise: the whole-process cost of reading, filtering,
+  smoothing and writing the drive).
 
 The breakdown comes from ``summary.json`` ``timing_s`` (read, filter, smoother, the rest of
 the job) and from timers the child puts around its imports, ``write_outputs`` and the report
@@ -29,7 +33,8 @@ exit and the job loading.
 KF-GINS is timed only when a ``KF-GINS`` executable is on PATH; otherwise the issue's
 figures are printed for reference.
 
-Run: ``python bench/bench_process.py [--repeat 3] [--only sim|drive] [--no-cold]``. Prints
+Run: ``python bench/bench_process.py [--repeat 3] [--only sim|drive] [--no-cold]
+[--no-autotune]``. Prints
 numbers; not a timed test. The machine has 2 cores shared with other work: say so with the
 numbers (the load average is printed).
 """
@@ -225,6 +230,25 @@ def simulated_job(data: Path, hours: float) -> Path:
     return job
 
 
+def fixed_noise_job(job: Path, folder: Path) -> Path:
+    """A copy of ``job`` in ``folder`` with ``filter.autotune = false`` (the input paths made
+    absolute, since they are relative to the job file)."""
+    import tomllib
+
+    text = job.read_text()
+    for src in tomllib.loads(text).get("inputs", {}).values():
+        for key in ("path", "tag"):
+            if isinstance(src, dict) and isinstance(src.get(key), str):
+                absolute = (job.parent / src[key]).resolve()
+                text = text.replace(f'"{src[key]}"', f'"{absolute}"')
+    if "\n[filter]\n" not in text:
+        text += "\n[filter]\n"
+    text = text.replace("\n[filter]\n", "\n[filter]\nautotune = false\n", 1)
+    out = folder / f"{job.stem}_fixed_noise.toml"
+    out.write_text(text)
+    return out
+
+
 def describe(name: str, mode: str, runs: list[Run]) -> dict:
     ok = [r for r in runs if r.code in (0, 3)]
     if not ok:
@@ -300,6 +324,8 @@ def main() -> None:
     ap.add_argument("--data", type=Path, default=DEFAULT_DATA,
                     help=f"folder for the simulated log (default {DEFAULT_DATA})")
     ap.add_argument("--no-cold", action="store_true", help="skip the cold-cache runs")
+    ap.add_argument("--no-autotune", action="store_true",
+                    help="the drive with filter.autotune = false (no self-tuning runs)")
     ap.add_argument("--code", type=Path, default=REPO,
                     help="checkout whose insgnss is timed (e.g. another branch; default this "
                     "one); the jobs and the scenario are this checkout's")
@@ -313,7 +339,11 @@ def main() -> None:
     if args.only in (None, "drive"):
         data = REPO.parent / "shared" / "data" / "gnss-imu-rtklibexplorer" / "drive_0708"
         if data.exists():
-            jobs.append(("drive", DRIVE_JOB))
+            if args.no_autotune:
+                folder = Path(tempfile.mkdtemp(prefix="bench-process-job-"))
+                jobs.append(("drive fixed", fixed_noise_job(DRIVE_JOB, folder)))
+            else:
+                jobs.append(("drive", DRIVE_JOB))
         else:
             print(f"drive: skipped, no data at {data}")
     if args.only in (None, "sim"):
