@@ -294,7 +294,9 @@ class FilterResult:
         Nominal parameter values at each node (process-model specific).
     updates : dict
         The applied updates: rows ``r0[e] .. r1[e]-1`` of ``H``, ``K`` (transposed), ``G =
-        S^-1 H``, ``s = S^-1 z`` belong to node ``e`` (:class:`insgnss.filter.store.NodeStore`).
+        S^-1 H``, ``s = S^-1 z`` belong to node ``e`` (:class:`insgnss.filter.store.NodeStore`);
+        the smoother's record, kept only when it runs (``config.smoother``; the compiled
+        high-rate path keeps its rows always).
     log : dict
         The innovation log as arrays (``time tid lid dof nis threshold accepted recovered innov
         innov_std``, ``names``: the measurement type of each ``tid``, and ``labels``: the row
@@ -538,7 +540,7 @@ def _gate(run: _Run, m, time: float, z, H, R, P, label: str = ""):
 
 def _update(run: _Run, e: int, x, P):
     """Step 2: evaluate, gate and apply the measurements of epoch ``e`` (one stacked
-    filterpy update). Returns ``(x, P, P_predicted_seen)``."""
+    filterpy update). Returns ``(x, P, P_predicted_seen, applied)``."""
     sched, model = run.sched, run.model
     zs, Hs, Rs = [], [], []
     Pp = P
@@ -562,7 +564,7 @@ def _update(run: _Run, e: int, x, P):
             Hs.append(H)
             Rs.append(R)
     if not zs:
-        return x, P, Pp
+        return x, P, Pp, False
     if len(zs) == 1:
         z, H, R = zs[0], Hs[0], Rs[0]
     else:
@@ -578,12 +580,14 @@ def _update(run: _Run, e: int, x, P):
     P = 0.5 * (P + P.T)
     if run.check:
         check_covariance(x, P, sched.epochs[e], "update")
-    # the smoother's record of the update: H, K = Pp H^T S^-1, S^-1 H, S^-1 z
-    S = H @ Pp @ H.T + R
-    Gs = np.linalg.solve(S, np.column_stack([H, z]))
-    G = Gs[:, :-1]
-    run.store.add_update(H, Pp @ G.T, G, Gs[:, -1])
-    return x, P, Pp
+    if run.config.smoother:
+        # the smoother's record of the update: H, K = Pp H^T S^-1, S^-1 H, S^-1 z (a
+        # forward-only run, e.g. of the self-tuning, skips it: a solve per epoch)
+        S = H @ Pp @ H.T + R
+        Gs = np.linalg.solve(S, np.column_stack([H, z]))
+        G = Gs[:, :-1]
+        run.store.add_update(H, Pp @ G.T, G, Gs[:, -1])
+    return x, P, Pp, True
 
 
 def _heading_reinit(run: _Run, te: float, P):
@@ -655,10 +659,11 @@ def run_engine(model: ProcessModelBase, measurements: list[Measurement], config:
                 P, cut = _heading_reinit(run, te, P)
                 if cut:  # a smoother boundary: nothing flows back across the reset
                     Phi = np.zeros_like(Phi)
-            x, P, Pp = _update(run, e, x, P) if sched.ptr[e + 1] > sched.ptr[e] else (x, P, P)
+            x, P, Pp, applied = _update(run, e, x, P) if sched.ptr[e + 1] > sched.ptr[e] \
+                else (x, P, P, False)
             if run.heading is not None:
                 run.heading.note(run.abs_nis)
-            if store.r0[node] < store.n_rows:  # an update was applied: feed back and reset
+            if applied:  # an update was applied: feed back and reset
                 fb = x
                 model.feedback(x)
                 x = np.zeros(n)
