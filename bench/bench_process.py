@@ -42,6 +42,7 @@ numbers (the load average is printed).
 from __future__ import annotations
 
 import argparse
+import atexit
 import json
 import os
 import shutil
@@ -341,6 +342,7 @@ def main() -> None:
         if data.exists():
             if args.no_autotune:
                 folder = Path(tempfile.mkdtemp(prefix="bench-process-job-"))
+                atexit.register(shutil.rmtree, folder, ignore_errors=True)
                 jobs.append(("drive fixed", fixed_noise_job(DRIVE_JOB, folder)))
             else:
                 jobs.append(("drive", DRIVE_JOB))
