@@ -753,6 +753,10 @@ SCHEMA: dict[str, Any] = {
                                        "levelled tilt with the accelerometer-bias states in P0 "
                                        "(FilterConfig.levelling_correlation; experimental)",
                                        when=STATIC),
+        "vibration_noise": _spec(bool, True, "add the vibration measured in the quiet "
+                                 "windows (a vehicle standing with the engine running) above "
+                                 "ARW/VRW as process noise there (insgnss.preprocess."
+                                 "vibration_noise, docs/filter.md)"),
         "noise_from_static": _spec(bool, False, "raise ARW/VRW to the noise measured in the "
                                    "static initialization window (vibration)", when=STATIC),
         "imu_grade": _spec(str, None, "IMU error model for the filter (default: the "

@@ -45,6 +45,21 @@ never the trapezoidal increments of the mechanization, whose averaging of neighb
 the variance of white noise. On a vehicle with the engine running this captures the
 vibration, which datasheet values do not. Samples that end a bridged gap are left out
 (:func:`insgnss.detect.regular_samples`): their interval is not the nominal one.
+
+Vibration in quiet windows
+--------------------------
+A parked car with the engine idling shakes its IMU well above the datasheet noise. What drives
+the attitude and velocity errors is the noise density at the filter's time scale, not at the
+sample rate (a vibration at 30 Hz of bounded amplitude integrates to nothing): from the
+overlapping Allan variance at ``tau`` = :data:`VIBRATION_TAU` (1 s) of each axis in each quiet
+window (the stationary periods of :func:`insgnss.detect.find_static_windows`: a vehicle
+standing, or driving straight at a steady speed, which the statistic cannot tell apart),
+``N^2 = tau AVAR(tau)`` (white noise: ``AVAR = N^2 / tau``; IEEE Std 952 annex C), averaged over
+the three axes. :func:`vibration_noise` adds what exceeds the filter's own ``ARW^2`` / ``VRW^2``
+as extra attitude and velocity process noise over that window (``FilterConfig.extra_noise``),
+``(N^2 - ARW^2) dt`` per step: the filter keeps its datasheet noise while the vehicle moves and
+takes the measured one while it stands. Windows shorter than :data:`VIBRATION_MIN_WINDOW` give
+no estimate (fewer than 3 independent clusters at ``tau``).
 """
 
 from __future__ import annotations
@@ -220,6 +235,58 @@ def static_noise(imu: pd.DataFrame) -> tuple[float, float]:
     w, f = w[ok], f[ok]
     return float(np.max(np.std(w, axis=0)) * np.sqrt(dt)), \
         float(np.max(np.std(f, axis=0)) * np.sqrt(dt))
+
+
+#: averaging time of the vibration noise density [s] (the filter's epoch interval)
+VIBRATION_TAU = 1.0
+#: shortest quiet window whose vibration is measured [s]
+VIBRATION_MIN_WINDOW = 4.0
+#: spacing of the extra-noise rows over a quiet window [s]
+VIBRATION_STEP = 1.0
+
+
+def vibration_density(imu: pd.DataFrame, tau: float = VIBRATION_TAU) -> tuple[float, float]:
+    """Gyro and accelerometer white-noise densities squared (``N^2 = tau AVAR(tau)``, mean of
+    the three axes) [rad^2/s, (m/s)^2/s] of a quiet IMU window (module docstring)."""
+    from .analysis.allan import allan_deviation_series
+
+    t, w, f = imu_rates(imu)
+    ok = regular_samples(t)
+    rate = 1.0 / float(np.median(np.diff(t)))
+    out = []
+    for x in (w[ok], f[ok]):
+        adev = [allan_deviation_series(x[:, k], rate, np.array([tau]))[1] for k in range(3)]
+        a = np.concatenate(adev)
+        out.append(float(tau * np.mean(a ** 2)) if a.size == 3 else 0.0)
+    return out[0], out[1]
+
+
+def vibration_noise(imu: pd.DataFrame, windows, model: ImuErrorModel, *,
+                    tau: float = VIBRATION_TAU, step: float = VIBRATION_STEP,
+                    min_window: float = VIBRATION_MIN_WINDOW) -> pd.DataFrame | None:
+    """Extra process noise for the vibration of the quiet ``windows`` ((t0, t1) pairs [s]) of
+    ``imu``: the measured densities (:func:`vibration_density`) above ``model``'s ARW and VRW,
+    as rows of :attr:`insgnss.filter.engine.FilterConfig.extra_noise` every ``step`` seconds
+    over each window (``att_std^2 = (N_g^2 - ARW^2) dt``, ``vel_std^2 = (N_a^2 - VRW^2) dt``).
+    None when no window shows more than the model."""
+    rows = []
+    for a, b in windows:
+        if b - a < min_window:
+            continue
+        qg, qa = vibration_density(imu.loc[a:b], tau)
+        xg = max(qg - model.gyro_arw ** 2, 0.0)
+        xa = max(qa - model.accel_vrw ** 2, 0.0)
+        if xg == 0.0 and xa == 0.0:
+            continue
+        n = max(int(np.ceil((b - a) / step)), 1)
+        ts = np.linspace(a, b, n + 1)
+        dt = np.diff(ts)
+        rows += [(t1, np.sqrt(xa * d), np.sqrt(xg * d)) for t1, d in zip(ts[1:], dt, strict=True)]
+    if not rows:
+        return None
+    r = np.asarray(rows)
+    return pd.DataFrame({"pos_std": 0.0, "vel_std": r[:, 1], "att_std": r[:, 2]},
+                        index=pd.Index(r[:, 0], name="time"))
 
 
 def with_static_noise(model: ImuErrorModel, imu_static: pd.DataFrame) -> ImuErrorModel:

@@ -358,6 +358,28 @@ def _initialize(job: Job, inputs: Inputs, model: ImuErrorModel, windows) -> Init
                           noise_window=noise_window, static_info=static_info)
 
 
+def standing_intervals(gnss: pd.DataFrame | None, windows) -> list[tuple[float, float]]:
+    """Intervals between consecutive usable GNSS epochs (outside the outage windows, no gap
+    longer than 1.5 epoch intervals) that both show a horizontal speed below
+    :data:`STATIC_GNSS_SPEED`: positive evidence that the vehicle stands (none without GNSS
+    velocities, or inside an outage)."""
+    if gnss is None or not len(gnss) or "vel_e" not in gnss.columns:
+        return []
+    g = outside_windows(gnss, windows)
+    t = g.index.to_numpy(float)
+    if t.size < 2:
+        return []
+    slow = np.hypot(g["vel_e"].to_numpy(float), g["vel_n"].to_numpy(float)) < STATIC_GNSS_SPEED
+    pair = slow[:-1] & slow[1:] & (np.diff(t) <= 1.5 * float(np.median(np.diff(t))))
+    out: list[tuple[float, float]] = []
+    for k in np.flatnonzero(pair):
+        if out and out[-1][1] == t[k]:
+            out[-1] = (out[-1][0], float(t[k + 1]))
+        else:
+            out.append((float(t[k]), float(t[k + 1])))
+    return out
+
+
 def _moving_intervals(gnss: pd.DataFrame | None, windows) -> list[tuple[float, float]]:
     """Intervals around the usable GNSS epochs faster than :data:`STATIC_GNSS_SPEED` (half an
     epoch interval either side): the antenna moved, so the platform is not static there."""

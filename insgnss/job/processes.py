@@ -39,7 +39,7 @@ from ..filter.health import with_imu_note
 from ..imu import ImuErrorModel, coning_sculling, increments, increments_table
 from ..io.spill import SpillAllocator
 from ..policies import gap_noise, sample_rates
-from ..preprocess import with_static_noise
+from ..preprocess import vibration_noise, with_static_noise
 from ..validate import warn
 from .aiding import (
     Aiding,
@@ -51,7 +51,7 @@ from .aiding import (
 )
 from .context import RunContext
 from .evaluation import evaluate_result
-from .initialization import Initialization, initialize
+from .initialization import Initialization, initialize, standing_intervals
 from .result import JobResult, PresetResult
 from .summary import filter_summary, initialization_summary, job_name, platform_summary, status
 from .tuning import Tuned, apply, autotune
@@ -136,6 +136,37 @@ def _filter_result(ctx: RunContext, init: Initialization, res, aiding: Aiding,
     return out
 
 
+def _with_vibration_noise(ctx: RunContext, tuned: Tuned, imu, cfg: FilterConfig):
+    """``filter.vibration_noise``: the extra process noise of the vibration measured in the
+    quiet windows (:func:`insgnss.preprocess.vibration_noise`) merged into ``cfg.extra_noise``;
+    the windows and densities go to ``summary.json`` ``preprocessing.vibration_noise``."""
+    import pandas as pd
+
+    from ..detect import find_static_windows
+
+    ini = tuned.job["initialization"]
+    bridged = [(g["start"], g["end"]) for g in ctx.imu_report["gaps"]
+               if g.get("action") == "bridged"]
+    quiet = find_static_windows(imu, max_accel_std=ini["static_max_accel_std"],
+                                max_rate_std=np.radians(ini["static_max_rate_std_deg"]),
+                                exclude=bridged).stationary
+    # the IMU statistic cannot tell a steady drive from a stop: only where GNSS shows it stands
+    stand = standing_intervals(tuned.inputs.gnss, tuned.windows)
+    quiet = [(max(a, c), min(b, d)) for a, b in quiet for c, d in stand
+             if min(b, d) > max(a, c)]
+    xn = vibration_noise(imu, quiet, cfg.imu_model)
+    n = 0 if xn is None else len(xn)
+    ctx.preprocessing["vibration_noise"] = {
+        "quiet_windows": len(quiet), "rows": n,
+        "max_att_std_deg_per_step": 0.0 if not n else float(np.degrees(xn.att_std.max())),
+        "max_vel_std_m_s_per_step": 0.0 if not n else float(xn.vel_std.max())}
+    if xn is None:
+        return cfg.extra_noise
+    if cfg.extra_noise is None or not len(cfg.extra_noise):
+        return xn
+    return pd.concat([cfg.extra_noise, xn]).fillna(0.0).sort_index(kind="stable")
+
+
 def _strapdown_filter(ctx: RunContext, tuned: Tuned, smoother: bool = True,
                       init: Initialization | None = None):
     """Initialize (unless ``init``, the initialization of this job, inputs, model and windows,
@@ -160,6 +191,8 @@ def _strapdown_filter(ctx: RunContext, tuned: Tuned, smoother: bool = True,
         cfg.gate_recovery = None
     if job["inputs"]["imu"]["gap_noise"]:
         cfg.extra_noise = gap_noise(imu, ctx.imu_report["gaps"])  # bridged IMU gaps
+    if job["filter"]["vibration_noise"]:
+        cfg.extra_noise = _with_vibration_noise(ctx, tuned, imu, cfg)
     cfg.heading_reinit = heading_reinit(job, aiding, tuned.windows)
     if job["filter"]["frame"] == "wander":
         from ..filter.wander_model import run_wander_filter
