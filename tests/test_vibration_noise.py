@@ -79,22 +79,21 @@ def test_standing_intervals_need_two_slow_epochs_outside_outages():
 def test_position_nees_of_consistent_errors_is_three():
     rng = np.random.default_rng(7)
     n = 4000
-    ep = np.arange(n) * 0.25
-    A = np.array([[2.0, 0.0, 0.0], [0.8, 1.0, 0.0], [0.3, -0.2, 3.0]])
-    P = np.zeros((n, 12, 12))
-    P[:, :3, :3] = A @ A.T
-    P[:, 3:, 3:] = np.eye(9)
-    e = rng.standard_normal((n, 3)) @ A.T
-    err = pd.DataFrame(e, columns=["east", "north", "up"], index=pd.Index(ep, name="time"))
-    out = position_nees(err, ep, P, [(100.0, 400.0)])
+    t = np.arange(n) * 0.25
+    sd = np.column_stack([np.full(n, 2.0), np.linspace(0.5, 3.0, n), np.full(n, 4.0)])
+    e = rng.standard_normal((n, 3)) * sd
+    err = pd.DataFrame(np.column_stack([e, sd]), index=pd.Index(t, name="time"),
+                       columns=["east", "north", "up", "east_std", "north_std", "up_std"])
+    out = position_nees(err, [(100.0, 400.0)])
     assert out["nees_pos_n"] == n
     assert out["nees_pos_mean"] == pytest.approx(3.0, rel=0.06)
     assert out["nees_pos_outage_n"] == 1200
+    assert out["nees_pos_outage_mean"] == pytest.approx(3.0, rel=0.1)
     assert out["nees_pos_within_3sigma_fraction"] == pytest.approx(0.9973, abs=0.004)
     # twice the error: four times the NEES
-    big = position_nees(2 * err, ep, P, [])
+    big = position_nees(err.assign(east=2 * err.east, north=2 * err.north, up=2 * err.up), [])
     assert big["nees_pos_mean"] == pytest.approx(4 * out["nees_pos_mean"], rel=1e-9)
     assert big["nees_pos_within_3sigma_fraction"] < 0.9
     assert CHI2_3DOF_3SIGMA == pytest.approx(14.156, abs=1e-3)
-    # reference epochs that are no filter epochs: nothing
-    assert position_nees(err.set_axis(ep + 0.1, axis=0), ep, P, []) == {}
+    # a solution without stds: nothing
+    assert position_nees(err[["east", "north", "up"]], []) == {}

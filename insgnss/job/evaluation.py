@@ -3,16 +3,17 @@ position errors at the reference epochs, at the point the reference measures, th
 metrics of the drive benchmark protocol (:mod:`insgnss.evaluate`) and the single-run position
 NEES.
 
-Position NEES ``e^T P^-1 e`` (3 dof; :func:`insgnss.consistency.nees_blocks`) at the reference
-epochs that are filter epochs, with the full position block of the forward ``P(e|e)`` or the
-smoothed ``P`` (the error state's position at the IMU point; the error at the reference point
-differs by the lever arm times the attitude error, millimetres; not for the wander-azimuth
-frame, whose P is in ECEF axes). Summarised over the epochs
-inside the outage windows (``nees_pos_outage_*``): there the reference is independent of the
-filter, while outside them the GNSS fixes the filter uses are often the reference itself
-(``nees_pos_*`` over all epochs is then far below 3). A consistent filter has a mean of 3 and
-99.73 % of the epochs below ``chi2_3(99.73 %)`` = 14.16 (``*_within_3sigma_fraction``; the
-epochs of one outage are correlated, so this is no independent-sample test).
+Position NEES (3 dof) at every reference epoch, from the solution's ``east_std north_std
+up_std`` interpolated there (the diagonal of ``P``: the output tables carry no correlations, as
+in the end-of-outage 3-sigma test of :mod:`insgnss.evaluate`; the filter epochs, where the full
+``P`` is kept, fall on reference epochs only where GNSS epochs are, hardly ever inside an
+outage): ``(e_E/s_E)^2 + (e_N/s_N)^2 + (e_U/s_U)^2``. Summarised over the epochs inside the
+outage windows (``nees_pos_outage_*``): there the reference is independent of the filter, while
+outside them the GNSS fixes the filter uses are often the reference itself (``nees_pos_*`` over
+all epochs then mostly says how closely the filter follows its own aiding). A consistent filter
+has a mean of 3 and 99.73 % of the epochs below ``chi2_3(99.73 %)`` = 14.16
+(``*_within_3sigma_fraction``; the epochs of one outage are correlated, so this is no
+independent-sample test).
 """
 
 from __future__ import annotations
@@ -48,6 +49,7 @@ def evaluate_solution(sol: pd.DataFrame, inputs: Inputs, windows, job: Job) -> d
     summary["max_h_m"] = float(hz.max()) if len(hz) else float("nan")
     summary["n_reference"] = int(len(err))
     summary["n_covered"] = int(err["horizontal"].notna().sum())
+    summary.update(position_nees(err, windows))
     return {"errors": err, "outages": table, "summary": summary}
 
 
@@ -55,27 +57,22 @@ def evaluate_solution(sol: pd.DataFrame, inputs: Inputs, windows, job: Job) -> d
 CHI2_3DOF_3SIGMA = 14.156
 
 
-def position_nees(err: pd.DataFrame, epoch_times, P, windows) -> dict:
-    """Summary of the position NEES (module docstring) at the rows of ``err`` (``east north
-    up`` at reference epochs) that are epochs ``epoch_times`` of the covariances ``P``; empty
-    without covariances or coinciding epochs."""
-    from ..consistency import match_times, nees_blocks
+def position_nees(err: pd.DataFrame, windows) -> dict:
+    """Summary of the position NEES (module docstring) of an error table with ``east north
+    up`` and ``east_std north_std up_std``; empty without the stds."""
     from ..outages import in_windows
 
-    if P is None or epoch_times is None or not len(epoch_times) or not len(err):
+    cols = ["east", "north", "up"]
+    if not len(err) or not all(f"{c}_std" in err.columns for c in cols):
         return {}
-    ep = np.asarray(epoch_times, float)[: P.shape[0]]
-    t = err.index.to_numpy(float)
-    k = match_times(t, ep)
-    e = err[["east", "north", "up"]].to_numpy(float)
-    use = (k >= 0) & np.isfinite(e).all(axis=1)
-    if not np.any(use):
-        return {}
-    x = np.column_stack([e[use], np.zeros((int(use.sum()), 6))])
-    nees = nees_blocks(x, P[k[use]][:, :9, :9])[:, 0]
-    inside = in_windows(t[use], windows)
+    e = err[cols].to_numpy(float)
+    sd = err[[f"{c}_std" for c in cols]].to_numpy(float)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        nees = np.sum((e / sd) ** 2, axis=1)
+    ok = np.isfinite(nees) & np.all(sd > 0, axis=1)
+    inside = in_windows(err.index.to_numpy(float), windows)
     out = {}
-    for tag, m in (("nees_pos", np.isfinite(nees)), ("nees_pos_outage", inside & np.isfinite(nees))):
+    for tag, m in (("nees_pos", ok), ("nees_pos_outage", ok & inside)):
         v = nees[m]
         out[f"{tag}_n"] = int(v.size)
         if v.size:
@@ -86,16 +83,10 @@ def position_nees(err: pd.DataFrame, epoch_times, P, windows) -> dict:
 
 
 def evaluate_result(out: JobResult) -> JobResult:
-    """Fill ``out.evaluation`` for the forward and the smoothed solution (with the position
-    NEES where the filter kept its epoch covariances); returns ``out``."""
+    """Fill ``out.evaluation`` for the forward and the smoothed solution; returns ``out``."""
     for name in ("forward", "smoothed"):
         ev = evaluate_solution(getattr(out.filter, name), out.inputs, out.windows, out.job)
         if ev:
-            # (the wander-azimuth model keeps P in ECEF axes: no ENU NEES from it)
-            P = None if out.job["filter"]["frame"] == "wander" else \
-                getattr(out.filter, "P_filtered" if name == "forward" else "P_smoothed", None)
-            ev["summary"].update(position_nees(ev["errors"], getattr(out.filter, "epoch_times",
-                                                                     None), P, out.windows))
             out.evaluation[name] = ev
     return out
 
