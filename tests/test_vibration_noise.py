@@ -97,3 +97,30 @@ def test_position_nees_of_consistent_errors_is_three():
     assert CHI2_3DOF_3SIGMA == pytest.approx(14.156, abs=1e-3)
     # a solution without stds: nothing
     assert position_nees(err[["east", "north", "up"]], []) == {}
+
+
+def test_simulated_idle_vibration_is_measured_at_the_stops():
+    # the tactical-MEMS car: 0.2 deg/s and 0.15 m/s^2 of white idle vibration per 100 Hz sample
+    # at the start and the two stops with GNSS -> N = 0.02 deg/sqrt(s) and 0.015 m/s/sqrt(s),
+    # far above the preset's 0.1 deg/sqrt(h) and 0.03 m/s/sqrt(h): per 1 s step, that std
+    import tomllib
+    import warnings
+    from pathlib import Path
+
+    from insgnss.config import load_job_dict
+    from insgnss.pipeline import run_job
+
+    path = Path(__file__).resolve().parents[1] / "scenarios" / "mc_car_tactical_mems.toml"
+    data = tomllib.loads(path.read_text())
+    data["filter"]["smoother"] = False
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        res = run_job(load_job_dict(data, path), progress=False, seed=5)
+    vib = res.summary["preprocessing"]["vibration_noise"]
+    # (a GNSS speed epoch above 0.3 m/s, 1 % of them with 0.1 m/s noise, splits a stop)
+    assert 3 <= vib["quiet_windows"] <= 6
+    assert vib["max_att_std_deg_per_step"] == pytest.approx(0.02, rel=0.2)
+    assert vib["max_vel_std_m_s_per_step"] == pytest.approx(0.015, rel=0.2)
+    ev = res.summary["evaluation"]["forward"]
+    assert ev["nees_pos_outage_n"] > 0 and ev["nees_pos_n"] > ev["nees_pos_outage_n"]
+    assert 0.5 < ev["nees_pos_outage_mean"] < 10.0
