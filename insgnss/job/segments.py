@@ -188,15 +188,18 @@ def merge_filter_results(parts):
         return np.concatenate(arrs)
 
     timing = {k: float(sum(f.timing.get(k, 0.0) for f in fs)) for k in fs[0].timing}
-    return replace(fs[0], forward=cat("forward"), smoothed=cat("smoothed"),
-                   innovations=cat("innovations"), rejected=cat("rejected"),
-                   complete=all(f.complete for f in fs), error=err, timing=timing,
-                   epoch_times=np.concatenate([f.epoch_times for f in fs]),
-                   P_filtered=stack("P_filtered"), P_predicted=stack("P_predicted"),
-                   feedback=stack("feedback"), P_smoothed=stack("P_smoothed"),
-                   params=stack("params"), final=fs[-1].final,
-                   heading_reinits=[dict(ev, segment=k) for k, f in parts
-                                    for ev in getattr(f, "heading_reinits", [])])
+    merged = replace(fs[0], forward_table=cat("forward"), smoothed_table=cat("smoothed"),
+                     log=None, complete=all(f.complete for f in fs), error=err, timing=timing,
+                     epoch_times=np.concatenate([f.epoch_times for f in fs]),
+                     P_filtered=stack("P_filtered"), P_predicted=stack("P_predicted"),
+                     feedback=stack("feedback"), P_smoothed=stack("P_smoothed"),
+                     params=stack("params"), final=fs[-1].final,
+                     heading_reinits=[dict(ev, segment=k) for k, f in parts
+                                      for ev in getattr(f, "heading_reinits", [])])
+    # the segments' innovation logs number their types apart: the merged tables are kept
+    # built (with their segment column) instead of one merged log
+    merged.__dict__["_innov"] = (cat("innovations"), cat("rejected"))
+    return merged
 
 
 __all__ = ["MIN_SEGMENT_SAMPLES", "merge_filter_results", "run_segments", "segment_job"]
