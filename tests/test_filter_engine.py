@@ -128,6 +128,24 @@ def test_outputs_and_logs(case):
     assert np.allclose(res.smoothed.iloc[-1], res.forward.iloc[-1], rtol=1e-9, atol=1e-12)
 
 
+def test_forward_only_run_keeps_innovations_and_forward(case):
+    """A forward-only run (``smoother=False``, the self-tuning's): the same innovations,
+    forward table and feedback as a run with the smoother, no record of the updates (only the
+    smoother reads it); a run that destroys P still stops."""
+    truth, imu, gnss, init = case
+    models = [GnssPosition(gnss), GnssVelocity(gnss)]
+    full = run_filter(imu, init, models, FilterConfig(imu_model="tactical"))
+    fwd = run_filter(imu, init, models, FilterConfig(imu_model="tactical", smoother=False))
+    pd.testing.assert_frame_equal(fwd.innovations, full.innovations)
+    pd.testing.assert_frame_equal(fwd.forward, full.forward)
+    assert np.array_equal(fwd.feedback, full.feedback) and np.abs(fwd.feedback).sum() > 0
+    assert full.updates["H"].shape[0] == 6 * len(gnss)
+    assert fwd.updates["H"].shape[0] == 0 and fwd.smoothed is None and fwd.complete
+    bad = run_filter(imu, init, [GnssPosition(gnss), _Bad([30.0])],
+                     FilterConfig(imu_model="tactical", gate_probability=None, smoother=False))
+    assert not bad.complete and "30.0" in str(bad.error)
+
+
 def test_config_validation():
     with pytest.raises(ConfigError):
         FilterConfig(discretization="euler").validate()
