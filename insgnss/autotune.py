@@ -27,6 +27,10 @@ through the current value and one step either side (an unbounded side is expande
 steps), the vertex clamped to two steps and the bounds, and evaluated only when the parabola
 predicts a gain of at least :data:`MIN_VERTEX_GAIN` there (a converged coordinate costs no
 extra filter run); ``sweeps`` passes over the parameters, the step halving after each. A
+coordinate whose line search gained less than :data:`MIN_VERTEX_GAIN` sits out the next sweeps
+while the other coordinates change the likelihood by less than :data:`OBSERVABLE_DLL` since
+(its optimum cannot have moved by more than its uncertainty). Every filter run is memoised by
+the parameter vector, so a point a sweep or the polish revisits costs nothing. A
 parameter is **observable** when moving it one step either way from its estimate (a factor 2
 for scales) lowers the likelihood by at least :data:`OBSERVABLE_DLL` (1.92: the 95 %
 likelihood-ratio test, chi-square 1 dof over 2); one that is not keeps its prior.
@@ -257,13 +261,18 @@ def tune(run: Callable[[dict], pd.DataFrame | None], parameters: Sequence[Parame
     theta, best = dict(theta0), L0
     scale = 1.0
     done = 0
+    last: dict = {}  # name -> (gain of its last line search, likelihood after it)
     for _ in range(int(sweeps)):
         moved = False
         for p in params:
+            if p.name in last and _converged(*last[p.name], best):
+                continue
             u_new, f_new = _line_search(p, theta, best, objective, scale)
+            gain = max(f_new - best, 0.0)
             if f_new > best + 1e-9:
                 theta[p.name], best = p.to_value(u_new), f_new
                 moved = True
+            last[p.name] = (gain, best)
         done += 1
         scale *= 0.5
         if not moved:
@@ -302,6 +311,14 @@ def tune(run: Callable[[dict], pd.DataFrame | None], parameters: Sequence[Parame
                       log_likelihood={"prior": L0, "estimate": best, "final": final},
                       sweeps=done, evaluations=state["evaluations"],
                       types=sorted(state["weights"] or {}))
+
+
+def _converged(gain: float, after: float, best: float) -> bool:
+    """A coordinate is left out of the next sweep (module docstring) when its last line search
+    gained less than :data:`MIN_VERTEX_GAIN` and the other coordinates have since changed the
+    likelihood by less than :data:`OBSERVABLE_DLL` (so they cannot have moved its optimum by
+    more than its own uncertainty); the polish still tests it a full step either way."""
+    return gain < MIN_VERTEX_GAIN and best - after < OBSERVABLE_DLL
 
 
 def _line_search(p: Parameter, theta: dict, f0: float, objective, scale: float

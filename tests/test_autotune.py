@@ -121,6 +121,34 @@ def test_unobservable_parameter_keeps_its_prior():
     assert res.values["other"] == 0.5
 
 
+def test_converged_coordinate_sits_out_the_next_sweep(monkeypatch):
+    """A coordinate whose line search gained less than MIN_VERTEX_GAIN is not searched again
+    while the others change the likelihood by less than OBSERVABLE_DLL: fewer filter runs, the
+    same estimates (the polish still tests it a full step either way)."""
+    from insgnss import autotune as at
+
+    run = _scale_problem(3.0)
+
+    def counted():
+        calls = []
+
+        def run2(theta):  # "other" does not change the innovations: its search gains 0
+            calls.append(dict(theta))
+            return run({"scale": theta["scale"]})
+        res = tune(run2, [Parameter("other", 0.5, 0.01, 10.0), Parameter("scale", 2.5, 0.1, 30.0)],
+                   sweeps=3)
+        return res, calls
+
+    res, calls = counted()
+    converged = at._converged
+    monkeypatch.setattr(at, "_converged", lambda *a: False)
+    full, full_calls = counted()
+    assert res.evaluations == len(calls) < full.evaluations == len(full_calls)
+    assert res.values == full.values and res.parameters["scale"]["observable"]
+    assert converged(0.01, -10.0, -9.0) and not converged(0.01, -10.0, -10.0 + 2.0)
+    assert not converged(0.1, -10.0, -10.0)
+
+
 def test_failed_runs_are_rejected():
     run = _scale_problem(2.0)
 
