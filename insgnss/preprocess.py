@@ -72,6 +72,7 @@ from .earth import geodetic_to_enu
 from .errors import InvalidValueError
 from .imu import ImuErrorModel
 from .outages import in_windows
+from .stats import chi2_ppf
 from .validate import check_time_overlap
 
 #: a time shift (IMU offset, velocity lag) is applied only when it lowers the RMS misfit by this
@@ -245,9 +246,23 @@ VIBRATION_MIN_WINDOW = 4.0
 VIBRATION_STEP = 1.0
 
 
-def vibration_density(imu: pd.DataFrame, tau: float = VIBRATION_TAU) -> tuple[float, float]:
+#: probability with which a measured density must exceed the model's to count as vibration
+VIBRATION_SIGNIFICANCE = 0.99
+
+
+def allan_edf_white(n: int, m: int) -> float:
+    """Equivalent degrees of freedom of the overlapping Allan variance of white rate noise
+    (white FM) from ``n`` samples at averaging factor ``m`` (NIST SP 1065, Table 5)."""
+    if n <= 2 * m:
+        return 0.0
+    return (3.0 * (n - 1) / (2.0 * m) - 2.0 * (n - 2) / n) * 4.0 * m * m / (4.0 * m * m + 5.0)
+
+
+def vibration_density(imu: pd.DataFrame, tau: float = VIBRATION_TAU
+                      ) -> tuple[float, float, float]:
     """Gyro and accelerometer white-noise densities squared (``N^2 = tau AVAR(tau)``, mean of
-    the three axes) [rad^2/s, (m/s)^2/s] of a quiet IMU window (module docstring)."""
+    the three axes) [rad^2/s, (m/s)^2/s] of a quiet IMU window (module docstring), and the
+    equivalent degrees of freedom of each mean (:func:`allan_edf_white`, three axes)."""
     from .analysis.allan import allan_deviation_series
 
     t, w, f = imu_rates(imu)
@@ -258,7 +273,19 @@ def vibration_density(imu: pd.DataFrame, tau: float = VIBRATION_TAU) -> tuple[fl
         adev = [allan_deviation_series(x[:, k], rate, np.array([tau]))[1] for k in range(3)]
         a = np.concatenate(adev)
         out.append(float(tau * np.mean(a ** 2)) if a.size == 3 else 0.0)
-    return out[0], out[1]
+    edf = 3.0 * allan_edf_white(int(ok.sum()), max(int(round(tau * rate)), 1))
+    return out[0], out[1], edf
+
+
+def _significant_excess(q: float, q_model: float, edf: float) -> float:
+    """``q - q_model`` when a window with ``edf`` degrees of freedom shows ``q`` above the
+    model's white-noise level with probability :data:`VIBRATION_SIGNIFICANCE` (chi-square of
+    the Allan variance estimate), else 0: an IMU that matches its model adds nothing."""
+    if edf < 1.0 or q <= q_model:
+        return 0.0
+    if q <= q_model * chi2_ppf(VIBRATION_SIGNIFICANCE, edf) / edf:
+        return 0.0
+    return q - q_model
 
 
 def vibration_noise(imu: pd.DataFrame, windows, model: ImuErrorModel, *,
@@ -273,9 +300,9 @@ def vibration_noise(imu: pd.DataFrame, windows, model: ImuErrorModel, *,
     for a, b in windows:
         if b - a < min_window:
             continue
-        qg, qa = vibration_density(imu.loc[a:b], tau)
-        xg = max(qg - model.gyro_arw ** 2, 0.0)
-        xa = max(qa - model.accel_vrw ** 2, 0.0)
+        qg, qa, edf = vibration_density(imu.loc[a:b], tau)
+        xg = _significant_excess(qg, model.gyro_arw ** 2, edf)
+        xa = _significant_excess(qa, model.accel_vrw ** 2, edf)
         if xg == 0.0 and xa == 0.0:
             continue
         n = max(int(np.ceil((b - a) / step)), 1)

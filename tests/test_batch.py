@@ -170,7 +170,7 @@ def test_batch_cli_with_a_job_overriding_the_settings(campaign, tmp_path, capsys
     own = campaign / "jobs" / "log0.toml"
     special = tmp_path / "special.toml"
     special.write_text(own.read_text().replace("../log0", str(campaign / "log0")) +
-                       "\n[outages]\nwindows = [[30.0, 50.0]]\n")
+                       "\n[outages]\nwindows = [[30.0, 60.0]]\n")
     out = tmp_path / "cli"
     code = cli_main(["batch", str(special), str(campaign / "jobs" / "log1.toml"),
                      "--settings", str(campaign / "lab.toml"), "-o", str(out),
