@@ -677,19 +677,15 @@ def main(argv: list[str] | None = None) -> int:
     a = p.parse_args(argv)
     cfg = load_config(a.config)
     t0 = time.perf_counter()
-    if a.only == "sensor":
-        sim, real = sensor_effects_sim(cfg), sensor_effects_real(cfg)
+    studies = {"sensor": (sensor_effects_sim, sensor_effects_real, print_sensor),
+               "skew": (skew_sim, skew_real, print_skew)}
+    if a.only in studies:
+        on_sim, on_real, show = studies[a.only]
+        sim, real = on_sim(cfg), on_real(cfg)
         if a.json:
             print(json.dumps({"simulation": sim, "real": real}, indent=1))
         else:
-            print_sensor(sim, real)
-        return 0
-    if a.only == "skew":
-        sim, real = skew_sim(cfg), skew_real(cfg)
-        if a.json:
-            print(json.dumps({"simulation": sim, "real": real}, indent=1))
-        else:
-            print_skew(sim, real)
+            show(sim, real)
         return 0
     if a.only == "sim":
         rows = sim_effects(cfg)
