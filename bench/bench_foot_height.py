@@ -38,11 +38,15 @@ misalignment on the simulated walk (end height and phase split), then an acceler
 compensated over -8..+4 ms on the real walks (end height, ``J`` and its vertical part, mean
 stance-to-stance height change, PyShoe phase split), and the forward accelerometer's size effect
 compensated on six PyShoe walks.
+``--only loading``: the loading phase (heel strike -> stance) of the PyShoe walks
+(``bench/foot_loading.py``): accelerometer vibration rectification against the shock energy,
+the pitch gyro's g-sensitivity and scale factor, the Vicon vertical velocity at the detected
+stance onset; each also alone in simulation.
 
 Usage::
 
     PYTHONPATH=. python bench/bench_foot_height.py [--config job.toml] [--forward] [--json]
-                                                  [--only xio|ucr|pyshoe|sim|sensor|level_floor|phases|skew]
+        [--only xio|ucr|pyshoe|sim|sensor|level_floor|phases|skew|loading]
 """
 
 from __future__ import annotations
@@ -672,13 +676,17 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--forward", action="store_true", help="the causal filter, not smoothed")
     p.add_argument("--json", action="store_true")
     p.add_argument("--only", choices=["xio", "ucr", "pyshoe", "sim", "level_floor", "sensor",
-                                      "phases", "skew"],
+                                      "phases", "skew", "loading"],
                    default=None)
     a = p.parse_args(argv)
     cfg = load_config(a.config)
     t0 = time.perf_counter()
     studies = {"sensor": (sensor_effects_sim, sensor_effects_real, print_sensor),
                "skew": (skew_sim, skew_real, print_skew)}
+    if a.only == "loading":
+        from foot_loading import loading_real, loading_sim, print_loading
+
+        studies["loading"] = (loading_sim, loading_real, print_loading)
     if a.only in studies:
         on_sim, on_real, show = studies[a.only]
         sim, real = on_sim(cfg), on_real(cfg)
