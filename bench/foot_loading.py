@@ -48,8 +48,9 @@ def imu_point_truth(res, truth_z: np.ndarray) -> dict:
     sol = res.forward
     t = sol.index.to_numpy()
     up = sol["up"].to_numpy()
-    up_row = np.array([euler_to_dcm(r, p, h)[2] for r, p, h in
-                       sol[["roll", "pitch", "heading"]].to_numpy()])
+    C = np.array([euler_to_dcm(r, p, h) for r, p, h in
+                  sol[["roll", "pitch", "heading"]].to_numpy()])
+    up_row = C[:, 2]
     runs = _runs(res.stillness.still.to_numpy(bool))
     swings = [(b0 - 1, a1) for (_, b0), (a1, _) in zip(runs[:-1], runs[1:], strict=True)
               if t[a1] - t[b0 - 1] > 0.25]  # detector splits inside one stance are no swing
@@ -57,11 +58,12 @@ def imu_point_truth(res, truth_z: np.ndarray) -> dict:
     y = np.concatenate([(truth_z[a:b + 1] - truth_z[a]) - (up[a:b + 1] - up[a])
                         for a, b in swings])
     r = np.linalg.lstsq(A, y, rcond=None)[0]
-    return {"t": t, "up": up, "vel_u": sol["vel_u"].to_numpy(), "up_row": up_row,
+    return {"t": t, "up": up, "vel_u": sol["vel_u"].to_numpy(), "up_row": up_row, "C": C,
             "z": truth_z - up_row @ r, "runs": runs, "swings": swings, "r": r}
 
 
-def loading_strides(res, imu, truth_z: np.ndarray) -> list[dict]:
+def loading_strides(res, imu, truth_z: np.ndarray, truth_xy: np.ndarray | None = None
+                    ) -> list[dict]:
     """Per-stride quantities of the loading phase (heel strike -> first stance sample).
 
     ``load``: height error gained there [m]; ``X20``, ``X50``: the rectification regressor
@@ -71,7 +73,13 @@ def loading_strides(res, imu, truth_z: np.ndarray) -> list[dict]:
     ``stance``: height error gained over the stance [m]; ``dv_pre``, ``dv_post``: mean
     INS-minus-truth vertical velocity 20-100 ms before and 50-150 ms after the heel strike,
     relative to the release [m/s]; ``dvh``: horizontal velocity change over the loading phase
-    [m/s]; ``dpitch``: rotation angle over it [rad].
+    [m/s]; ``dpitch``: rotation angle over it [rad]. With ``truth_xy`` (the Vicon horizontal
+    position, rotated onto the INS east/north by a 2-D rigid fit of the IMU point) also the
+    forward (along the stride) velocity error before and after the heel strike (``dvf_pre``,
+    ``dvf_post``) and, for the swing (release + 50 ms -> heel strike - 50 ms) and the loading
+    phase, the sums ``sum v_ins v_truth`` and ``sum v_ins^2`` of the forward and vertical
+    velocities relative to the release (``{sw,ld}_{f,u}_{it,ii}``): their ratio is the slope
+    of the truth on the INS velocity.
     """
     from bench_foot_height import HEEL_STRIKE_SEARCH
     from scipy.signal import butter, savgol_filter, sosfiltfilt
@@ -89,6 +97,13 @@ def loading_strides(res, imu, truth_z: np.ndarray) -> list[dict]:
     sol = res.forward
     vh = sol[["vel_e", "vel_n"]].to_numpy()
     k20, k100, k50, k150 = (int(round(s / dt)) for s in (0.02, 0.1, 0.05, 0.15))
+    if truth_xy is not None:
+        from foot_data import rigid_fit_2d
+
+        xy = truth_xy - p["C"][:, :2, :] @ p["r"]
+        Rf, cf = rigid_fit_2d(xy, sol[["east", "north"]].to_numpy())
+        xy = xy @ Rf.T + cf
+        vxy_t = savgol_filter(xy, VEL_WINDOW, 3, deriv=1, delta=dt, axis=0)
     out = []
     for (a, b), (a2, _) in zip(p["swings"][:-1], p["swings"][1:], strict=True):
         lo = max(a, b - int(round(HEEL_STRIKE_SEARCH / dt)))
@@ -109,8 +124,53 @@ def loading_strides(res, imu, truth_z: np.ndarray) -> list[dict]:
             row["dv_post"] = float(np.mean(ev[hs + k50:hs + k150]) - ev[a])
             row["dv_step"] = row["dv_post"] - row["dv_pre"]
             row["v_impact"] = float(np.mean(vt[hs - k100:hs - k20]))
+        if truth_xy is not None and hs - k100 > a and hs + k150 < len(t):
+            d = xy[a2] - xy[a]
+            d = d / np.linalg.norm(d)
+            fi, ft = vh @ d - vh[a] @ d, vxy_t @ d - vxy_t[a] @ d
+            ef = fi - ft
+            row["dvf_pre"] = float(np.mean(ef[hs - k100:hs - k20]))
+            row["dvf_post"] = float(np.mean(ef[hs + k50:hs + k150]))
+            row["vf_truth_pre"] = float(np.mean(ft[hs - k100:hs - k20]))
+            row["vf_truth_post"] = float(np.mean(ft[hs + k50:hs + k150]))
+            row["vu_truth_post"] = float(np.mean(vt[hs + k50:hs + k150]))
+            ui, ut = vu - vu[a], vt - vt[a]
+            for ph, sl in (("sw", slice(a + k50, hs - k50)), ("ld", slice(hs + 2, b))):
+                for c, (x_i, x_t) in (("f", (fi, ft)), ("u", (ui, ut))):
+                    row[f"{ph}_{c}_it"] = float(np.sum(x_i[sl] * x_t[sl]))
+                    row[f"{ph}_{c}_ii"] = float(np.sum(x_i[sl] ** 2))
         out.append(row)
     return out
+
+
+def stride_climb_vs_shock(res, imu) -> dict:
+    """Truth-free form of test 1 for any level walk: the forward solution's height change
+    from the start of one stance to the start of the next (on a level floor, the INS error of
+    that stride) against the shock energy of its loading phase (high-pass at 20 Hz, or at a
+    quarter of the rate below 80 Hz). Returns the correlation, the number of strides, the mean
+    climb [m] and the mean energy [g^2 s]."""
+    from bench_foot_height import HEEL_STRIKE_SEARCH, _runs
+    from scipy.signal import butter, sosfiltfilt
+
+    t = res.forward.index.to_numpy()
+    up = res.forward["up"].to_numpy()
+    dt = float(np.median(np.diff(t)))
+    fc = min(20.0, 0.25 / dt)
+    f = imu[["accel_x", "accel_y", "accel_z"]].to_numpy()
+    fn = np.linalg.norm(f, axis=1)
+    fhp = sosfiltfilt(butter(2, fc, "highpass", fs=1 / dt, output="sos"), f, axis=0) / G0
+    runs = [(s0, e0) for s0, e0 in _runs(res.stillness.still.to_numpy(bool))]
+    starts = [s0 for (s0, _), (_, e_prev) in zip(runs[1:], runs[:-1], strict=True)
+              if t[s0] - t[e_prev - 1] > 0.25]
+    dh, en = [], []
+    for b0, b1 in zip(starts[:-1], starts[1:], strict=True):
+        lo = max(b0, b1 - int(round(HEEL_STRIKE_SEARCH / dt)))
+        hs = lo + int(np.argmax(fn[lo:b1 + 1]))
+        dh.append(up[b1] - up[b0])
+        en.append(float(np.sum(fhp[hs:b1 + 1] ** 2) * dt))
+    dh, en = np.array(dh), np.array(en)
+    return {"r": float(np.corrcoef(dh, en)[0, 1]), "strides": len(dh), "hp_hz": fc,
+            "climb_mm": 1e3 * float(dh.mean()), "E_g2s": float(en.mean())}
 
 
 def _corr(x, y, groups) -> tuple[float, float, float]:
@@ -157,6 +217,20 @@ def summarize(trials: dict[str, list[dict]]) -> dict:
     out["r_dv_step_load"] = _corr(col["dv_step"][ok], y[ok], gk)
     out["r_dv_step_v_impact"] = _corr(col["dv_step"][ok], col["v_impact"][ok], gk)
     out["v_impact_mm_s"] = 1e3 * float(np.mean(col["v_impact"][ok]))
+    if "dvf_pre" in col:
+        okf = np.isfinite(col["dvf_pre"])
+        out["dvf_pre_mm_s"] = 1e3 * float(np.mean(col["dvf_pre"][okf]))
+        out["dvf_post_mm_s"] = 1e3 * float(np.mean(col["dvf_post"][okf]))
+        dF = float(np.mean(col["vf_truth_post"][okf] - col["vf_truth_pre"][okf]))
+        dU = float(np.mean(col["vu_truth_post"][okf] - col["v_impact"][okf]))
+        eps = (out["dv_post_mm_s"] - out["dv_pre_mm_s"]) * 1e-3 / dF  # tilt for the up step
+        out["impact_dv_truth_m_s"] = (dF, dU)
+        out["tilt_for_up_step_deg"] = float(np.degrees(eps))
+        out["tilt_forward_step_mm_s"] = -1e3 * eps * dU
+        for ph in ("sw", "ld"):
+            for c in ("f", "u"):
+                out[f"slope_{ph}_{c}"] = float(np.nansum(col[f"{ph}_{c}_it"]) /
+                                               np.nansum(col[f"{ph}_{c}_ii"]))
     # a tilt error eps during the loading phase gives about eps * dvh * T / 2 of height
     out["tilt_needed_deg"] = float(np.degrees(np.mean(y) / np.mean(col["dvh"] * col["T"] / 2)))
     out["dvh_m_s"] = float(col["dvh"].mean())
@@ -169,7 +243,7 @@ def summarize(trials: dict[str, list[dict]]) -> dict:
 def loading_real(cfg) -> dict:
     """The 12 PyShoe walking trials of 2017-11-22: per-stride statistics (:func:`summarize`);
     on fold A (the first six) the gyro effects compensated with the preset's stances held."""
-    from bench_foot_height import SITES, convert, stride_phases
+    from bench_foot_height import SITES, convert, read_ucr, read_xio, stride_phases
     from foot_data import DATA
 
     from insgnss.detect import imu_rates, stance_entry_rms
@@ -183,7 +257,7 @@ def loading_real(cfg) -> dict:
         imu, truth = convert.to_insgnss(mat)
         tz = truth["z"].to_numpy() - truth["z"].iloc[0]
         res = run_foot_ins(imu, cfg, lat=lat, lon=lon, height=h)
-        trials[mat.stem] = loading_strides(res, imu, tz)
+        trials[mat.stem] = loading_strides(res, imu, tz, truth[["x", "y"]].to_numpy())
         if i >= 6:
             continue
         t, w, a = imu_rates(imu)
@@ -197,7 +271,17 @@ def loading_real(cfg) -> dict:
                          "dh": float(r2.trajectory.up.iloc[-1] - tz[-1]),
                          "load_mm": 1e3 * ph["heel_strike_to_stance"],
                          "J_mm_s": 1e3 * stance_entry_rms(nu, still)})
-    return {"summary": summarize(trials), "gyro": comp,
+    shock = {}
+    for i, mat in enumerate(mats):
+        imu, _ = convert.to_insgnss(mat)
+        res = run_foot_ins(imu, cfg, lat=lat, lon=lon, height=h)
+        shock[f"pyshoe fold {'AB'[i // 6]} {mat.stem[-8:]}"] = stride_climb_vs_shock(res, imu)
+    for name, imu, site in ([(f"xio {n.split('_')[0]}", read_xio(n), SITES["xio"])
+                             for n in ("short_walk", "long_walk")] +
+                            [(f"ucr {s}", read_ucr(s), SITES["ucr"]) for s in ("left", "right")]):
+        res = run_foot_ins(imu, cfg, lat=site[0], lon=site[1], height=site[2])
+        shock[name] = stride_climb_vs_shock(res, imu)
+    return {"summary": summarize(trials), "gyro": comp, "shock_truth_free": shock,
             "per_trial": {k: {"load_mm": 1e3 * float(np.mean([r["load"] for r in v])),
                               "E20": float(np.mean([r["E20"] for r in v])),
                               "v_onset_mm_s": 1e3 * float(np.median([r["v_onset"] for r in v])),
@@ -297,6 +381,15 @@ def print_loading(sim: list[dict], real: dict) -> None:
           f"{s['r_dv_step_load'][1]:+.2f} {s['r_dv_step_load'][2]:+.2f}, step vs truth v_up "
           f"{s['r_dv_step_v_impact'][0]:+.2f} {s['r_dv_step_v_impact'][1]:+.2f} "
           f"{s['r_dv_step_v_impact'][2]:+.2f}")
+    if "dvf_pre_mm_s" in s:
+        print(f"  INS-truth forward velocity: {s['dvf_pre_mm_s']:+.1f} mm/s before, "
+              f"{s['dvf_post_mm_s']:+.1f} mm/s after the heel strike; truth on INS velocity "
+              f"slope, forward / vertical: swing {s['slope_sw_f']:.3f} / {s['slope_sw_u']:.3f}, "
+              f"loading {s['slope_ld_f']:.3f} / {s['slope_ld_u']:.3f}")
+        print(f"  truth velocity change between the windows, forward / up: "
+              f"{s['impact_dv_truth_m_s'][0]:+.3f} / {s['impact_dv_truth_m_s'][1]:+.3f} m/s; the "
+              f"tilt that gives the vertical step, {s['tilt_for_up_step_deg']:+.1f} deg, gives "
+              f"{s['tilt_forward_step_mm_s']:+.1f} mm/s forward")
     print(f"  loading phase: truth / INS descent {s['descent_mm'][0]:.1f} / {s['descent_mm'][1]:.1f}"
           f" mm, |dv_h| {s['dvh_m_s']:.2f} m/s, rotation {s['dpitch_deg']:.1f} deg; tilt error "
           f"needed for the climb {s['tilt_needed_deg']:.2f} deg")
@@ -306,6 +399,10 @@ def print_loading(sim: list[dict], real: dict) -> None:
     for k, v in real["per_trial"].items():
         print(f"  {k}  load {v['load_mm']:+5.1f} mm  E20 {v['E20']:.4f}  v_onset "
               f"{v['v_onset_mm_s']:+5.0f} mm/s  sink {v['sink_mm']:.1f} mm")
+    print("truth-free: stance-to-stance height change vs loading-phase shock energy, per stride")
+    for k, v in real["shock_truth_free"].items():
+        print(f"  {k:26s} r {v['r']:+.2f}  n {v['strides']:3d}  climb {v['climb_mm']:+5.1f} mm  "
+              f"E {v['E_g2s']:.4f} g^2 s (> {v['hp_hz']:.0f} Hz)")
     print("fold A, gyro effects compensated (stances held): end height [m], loading [mm/stride], J")
     for r in real["gyro"]:
         print(f"  {r['track']:22s} {r['effect']:46s} {r['size']:+6.3g}  dh {r['dh']:+7.3f}  "
