@@ -70,7 +70,8 @@ def loading_strides(res, imu, truth_z: np.ndarray, truth_xy: np.ndarray | None =
     [s^2] at the two high-pass corners; ``E20``, ``E50``: shock energy [g^2 s]; ``v_onset``:
     truth vertical velocity of the IMU point at the first ZUPT sample [m/s]; ``sink``: the
     truth height the IMU point still loses after it (to its lowest point in the stance) [m];
-    ``stance``: height error gained over the stance [m]; ``dv_pre``, ``dv_post``: mean
+    ``stance``: height error gained over the stance [m]; ``settle``: the part of it gained
+    until the IMU point's lowest point; ``dv_pre``, ``dv_post``: mean
     INS-minus-truth vertical velocity 20-100 ms before and 50-150 ms after the heel strike,
     relative to the release [m/s]; ``dvh``: horizontal velocity change over the loading phase
     [m/s]; ``dpitch``: rotation angle over it [rad]. With ``truth_xy`` (the Vicon horizontal
@@ -112,6 +113,7 @@ def loading_strides(res, imu, truth_z: np.ndarray, truth_xy: np.ndarray | None =
         lever = t[b] - t[seg]
         row = {"load": err[b] - err[hs], "stance": err[a2] - err[b], "T": t[b] - t[hs],
                "v_onset": vt[b], "sink": z[b] - z[b:a2 + 1].min(),
+               "settle": err[b + int(np.argmin(z[b:a2 + 1]))] - err[b],
                "truth_descent": z[hs] - z[b], "ins_descent": up[hs] - up[b],
                "dvh": float(np.linalg.norm(vh[b] - vh[hs])),
                "dpitch": float(np.sum(np.linalg.norm(w[seg], axis=1)) * dt),
@@ -210,6 +212,7 @@ def summarize(trials: dict[str, list[dict]]) -> dict:
     out["sink_mm"] = [1e3 * float(np.percentile(col["sink"], q)) for q in (10, 50, 90)]
     out["sink_mean_mm"] = 1e3 * float(col["sink"].mean())
     out["r_sink_load"] = _corr(col["sink"], y, g)
+    out["settle_mm"] = 1e3 * float(col["settle"].mean())
     ok = np.isfinite(col["dv_pre"])
     out["dv_pre_mm_s"] = 1e3 * float(np.mean(col["dv_pre"][ok]))
     out["dv_post_mm_s"] = 1e3 * float(np.mean(col["dv_post"][ok]))
@@ -374,7 +377,8 @@ def print_loading(sim: list[dict], real: dict) -> None:
     print(f"  truth v_up at the first ZUPT sample [mm/s] p10/p50/p90: "
           f"{'/'.join(f'{v:+.0f}' for v in s['v_onset_mm_s'])}; the IMU point still sinks "
           f"{s['sink_mean_mm']:.1f} mm (p10/p50/p90 {'/'.join(f'{v:.1f}' for v in s['sink_mm'])}),"
-          f" corr. with the climb {s['r_sink_load'][0]:+.2f}")
+          f" corr. with the climb {s['r_sink_load'][0]:+.2f}; the stance ZUPT gains "
+          f"{s['settle_mm']:+.1f} mm to that point, {s['stance_mm'] - s['settle_mm']:+.1f} mm after")
     print(f"  INS-truth v_up relative to the release: {s['dv_pre_mm_s']:+.1f} mm/s before, "
           f"{s['dv_post_mm_s']:+.1f} mm/s after the heel strike (truth v_up before it "
           f"{s['v_impact_mm_s']:+.0f} mm/s); step vs climb r {s['r_dv_step_load'][0]:+.2f} "
