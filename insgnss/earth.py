@@ -265,9 +265,44 @@ def transport_rate_l(lat, h, vel):
     )
 
 
+def _vector_args(*xs) -> tuple[tuple[np.ndarray, ...], tuple | None]:
+    """The arguments of a vectorised kernel as 1-D C-contiguous writable float64 arrays of
+    their broadcast shape, and that shape (``None`` when every argument is a scalar).
+
+    numba compiles one specialisation per argument type, and the type includes the layout
+    and the read-only flag (a pandas column is read-only, a column slice of a table has
+    layout 'A', a scalar is a float): called with whatever the caller has, a small kernel was
+    compiled three to four times on a cold cache (about 1 s each). One argument type, one
+    compile; the values are the same.
+    """
+    arrs = np.broadcast_arrays(*(np.asarray(x, dtype=np.float64) for x in xs))
+    shape = arrs[0].shape
+    flat = tuple(np.require(a.reshape(-1), np.float64, ["C", "W"]) for a in arrs)
+    return flat, (shape if shape else None)
+
+
+def _vector_out(out: tuple, shape: tuple | None) -> tuple:
+    """The results of a kernel called through :func:`_vector_args`, in the callers' shape
+    (floats for scalar arguments)."""
+    if shape is None:
+        return tuple(float(o[0]) for o in out)
+    return tuple(o.reshape(shape) for o in out)
+
+
+def geodetic_to_ecef(lat, lon, h) -> tuple:
+    """Geodetic (lat, lon [rad], h [m]) to ECEF (x, y, z) [m] (Groves eq. 2.112).
+
+    Scalars or arrays (broadcast); floats for scalar arguments, else arrays of the broadcast
+    shape.
+    """
+    args, shape = _vector_args(lat, lon, h)
+    return _vector_out(geodetic_to_ecef_nb(*args), shape)
+
+
 @njit(cache=True)
-def geodetic_to_ecef(lat, lon, h):
-    """Geodetic (lat, lon [rad], h [m]) to ECEF (x, y, z) [m] (Groves eq. 2.112)."""
+def geodetic_to_ecef_nb(lat, lon, h):
+    """:func:`geodetic_to_ecef` in compiled code (scalars there; the Python entry point
+    calls it on 1-D float64 arrays only)."""
     _, N = radii(lat)
     cl = np.cos(lat)
     x = (N + h) * cl * np.cos(lon)
@@ -366,13 +401,20 @@ def enu_to_geodetic(e, n, u, lat0: float, lon0: float, h0: float):
     return ecef_to_geodetic(d[..., 0] + x0, d[..., 1] + y0, d[..., 2] + z0)
 
 
-@njit(cache=True)
-def enu_displacement_to_geodetic(lat, h, de, dn, du):
+def enu_displacement_to_geodetic(lat, h, de, dn, du) -> tuple:
     """Small ENU displacement [m] to (dlat, dlon [rad], dh [m]) using the local radii.
 
     This is the linearised relation used for error-state feedback: ``dlat = dn / (M + h)``,
-    ``dlon = de / ((N + h) cos lat)``, ``dh = du``.
+    ``dlon = de / ((N + h) cos lat)``, ``dh = du``. Scalars or arrays (broadcast); floats
+    for scalar arguments, else arrays of the broadcast shape.
     """
+    args, shape = _vector_args(lat, h, de, dn, du)
+    return _vector_out(_enu_displacement_to_geodetic(*args), shape)
+
+
+@njit(cache=True)
+def _enu_displacement_to_geodetic(lat, h, de, dn, du):
+    """:func:`enu_displacement_to_geodetic` on 1-D float64 arrays (one specialisation)."""
     M, N = radii(lat)
     return dn / (M + h), de / ((N + h) * np.cos(lat)), du
 

@@ -59,3 +59,54 @@ def test_one_specialisation_per_kernel_in_a_filter_run(tmp_path):
     assert sigs["mbf_backward15"] == []
     assert len(sigs["through_update"]) == 1, sigs["through_update"]
     assert len(sigs["back_through_sparse"]) == 1, sigs["back_through_sparse"]
+
+
+VECTOR_CHILD = r"""
+import json
+import numpy as np
+import pandas as pd
+from insgnss import earth
+
+lat = np.radians(np.linspace(-80.0, 80.0, 7))
+lon = np.radians(np.linspace(-170.0, 170.0, 7))
+h = np.linspace(-50.0, 3000.0, 7)
+table = pd.DataFrame({"lat": lat, "lon": lon, "h": h})
+ro = table["lat"].to_numpy(), table["lon"].to_numpy(), table["h"].to_numpy()
+for a in ro:
+    a.flags.writeable = False  # what a copy-on-write pandas column gives
+block = np.column_stack([lat, lon, h])  # column slices: layout 'A'
+calls = [(lat, lon, h), ro, (block[:, 0], block[:, 1], block[:, 2]), (lat[3], lon[3], h[3]),
+         (lat, lon[2], 0.0), (lat.reshape(7, 1), lon.reshape(1, 7), h[0])]
+ecef = [earth.geodetic_to_ecef(*c) for c in calls]
+disp = [earth.enu_displacement_to_geodetic(c[0], c[2], 1.0, 2.0, c[1]) for c in calls]
+N = earth.A / np.sqrt(1.0 - earth.E2 * np.sin(lat) ** 2)
+want = ((N + h) * np.cos(lat) * np.cos(lon), (N + h) * np.cos(lat) * np.sin(lon),
+        (N * (1.0 - earth.E2) + h) * np.sin(lat))
+print(json.dumps({
+    "ecef_sigs": [str(s) for s in earth.geodetic_to_ecef_nb.signatures],
+    "disp_sigs": [str(s) for s in earth._enu_displacement_to_geodetic.signatures],
+    "same": all(np.array_equal(ecef[0][i], ecef[k][i]) for k in (1, 2) for i in range(3)),
+    "scalar": [type(x).__name__ for x in ecef[3]] + [float(ecef[3][0] - ecef[0][0][3])],
+    "shapes": [list(np.shape(ecef[5][0])), list(np.shape(disp[5][1])), list(np.shape(disp[4][2]))],
+    "max_diff": float(max(np.max(np.abs(ecef[0][i] - want[i])) for i in range(3))),
+}))
+"""
+
+
+def test_vectorised_earth_helpers_compile_once(tmp_path):
+    """``geodetic_to_ecef`` / ``enu_displacement_to_geodetic`` compile one specialisation
+    whatever their callers pass (read-only pandas columns, column slices, scalars,
+    broadcasting shapes), with unchanged values."""
+    env = {**os.environ, "PYTHONPATH": str(ROOT), "NUMBA_CACHE_DIR": str(tmp_path),
+           "NUMBA_OPT": "0"}
+    out = subprocess.run([sys.executable, "-c", VECTOR_CHILD], capture_output=True, text=True,
+                         env=env, cwd=ROOT, timeout=600)
+    assert out.returncode == 0, out.stderr[-3000:]
+    r = json.loads(out.stdout.strip().splitlines()[-1])
+    arr = "Array(float64, 1, 'C', False, aligned=True)"
+    assert r["ecef_sigs"] == [f"({arr}, {arr}, {arr})"]
+    assert len(r["disp_sigs"]) == 1 and r["disp_sigs"][0].count("'C', False") == 5
+    assert r["same"]
+    assert r["scalar"][:3] == ["float", "float", "float"] and r["scalar"][3] == 0.0
+    assert r["shapes"] == [[7, 7], [7, 7], [7]]
+    assert r["max_diff"] < 1e-6  # metres, against the closed form in numpy

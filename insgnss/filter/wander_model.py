@@ -40,7 +40,7 @@ from numba import njit
 
 from .. import earth
 from ..attitude import dcm_to_euler_nb, euler_to_dcm_nb, rotvec_to_dcm_nb
-from ..earth import E2, A, ecef_to_geodetic, geodetic_to_ecef
+from ..earth import E2, A, ecef_to_geodetic, geodetic_to_ecef_nb
 from ..errors import ConfigError
 from ..mechanization.wander import nav_state, wander_state
 from . import kernels
@@ -299,7 +299,7 @@ def _wander_output(t, nav, seg, post, ep_t, P0, P1, X0, X1, par, correct, out):
         _enu_rows(lat, lon, Cel)
         euler_to_dcm_nb(nav[j, 6], nav[j, 7], nav[j, 8], Cbl)
         if correct:
-            r0, r1, r2 = geodetic_to_ecef(lat, lon, h)
+            r0, r1, r2 = geodetic_to_ecef_nb(lat, lon, h)
             for i in range(3):  # v^e = C_l^e v^l - dv
                 ve[i] = (Cel[0, i] * nav[j, 3] + Cel[1, i] * nav[j, 4] + Cel[2, i] * nav[j, 5]
                          - x[3 + i])
