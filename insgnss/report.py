@@ -336,7 +336,8 @@ def _png_bytes(fig) -> bytes:
     return buf.getvalue()
 
 
-#: what the figure workers draw: (specs, files), set before they are forked
+#: what the figure workers draw: (specs, files, order, next), set before they are forked
+#: (``order``: figure indices, largest first; ``next``: a shared counter into ``order``)
 _WORK: tuple | None = None
 
 
@@ -345,7 +346,7 @@ def _figure(i: int) -> bytes:
     its PNG bytes."""
     from .plots import render
 
-    specs, files = _WORK
+    specs, files = _WORK[:2]
     fig = render(specs[i])
     png = _png_bytes(fig)
     fig.set_layout_engine(None)  # laid out once; further formats only draw
@@ -355,6 +356,26 @@ def _figure(i: int) -> bytes:
         else:
             atomic_write(path, lambda p, e=ext: fig.savefig(p, format=e))
     return png
+
+
+def figure_cost(spec) -> int:
+    """Relative drawing cost of a figure: its axes (each with its ticks, labels and text,
+    where matplotlib spends most of the time) and its traces."""
+    return 4 * len(spec.panels) + sum(len(p.traces) for p in spec.panels) // 4
+
+
+def _take_figures() -> dict[int, bytes]:
+    """Draw figures of :data:`_WORK` taken from the shared queue until it is empty; their PNG
+    bytes by index."""
+    _, _, order, nxt = _WORK
+    out = {}
+    while True:
+        with nxt.get_lock():
+            k = nxt.value
+            nxt.value += 1
+        if k >= len(order):
+            return out
+        out[order[k]] = _figure(order[k])
 
 
 def figure_workers(n_figures: int) -> int:
@@ -376,26 +397,34 @@ def _draw_figures(specs, files, while_drawing=None) -> list[bytes]:
     """PNG bytes of every figure (``files[i]``: the ``(ext, path)`` to write of figure ``i``),
     drawn by this process and :func:`figure_workers` forked workers (matplotlib spends most of
     its time in Python, one figure at a time per process); ``while_drawing()`` runs here
-    meanwhile. The paths are resolved here, before forking, so that an output set records
-    every name in this process."""
+    meanwhile. Every process takes the next figure from one shared queue, largest first
+    (:func:`figure_cost`), so that none waits idle while another still has several figures
+    to draw (a fixed split left the process with the sensor-error figure a second behind on
+    the real drive). The paths are resolved here, before forking, so that an output set
+    records every name in this process."""
     global _WORK
-    _WORK = (specs, files)
+    import multiprocessing
+
+    order = sorted(range(len(specs)), key=lambda i: -figure_cost(specs[i]))  # stable
+    workers = figure_workers(len(specs))
+    ctx = multiprocessing.get_context("fork") if workers else multiprocessing
+    _WORK = (specs, files, order, ctx.Value("i", 0))
     try:
-        workers = figure_workers(len(specs))
         if not workers:
             if while_drawing is not None:
                 while_drawing()
-            return [_figure(i) for i in range(len(specs))]
-        import multiprocessing
+            got = _take_figures()
+            return [got[i] for i in range(len(specs))]
         from concurrent.futures import ProcessPoolExecutor
 
-        mine = set(range(0, len(specs), workers + 1))  # this process draws every n-th
-        with ProcessPoolExecutor(workers, mp_context=multiprocessing.get_context("fork")) as ex:
-            remote = {i: ex.submit(_figure, i) for i in range(len(specs)) if i not in mine}
+        with ProcessPoolExecutor(workers, mp_context=ctx) as ex:
+            remote = [ex.submit(_take_figures) for _ in range(workers)]
             if while_drawing is not None:
                 while_drawing()
-            local = {i: _figure(i) for i in sorted(mine)}
-            return [local[i] if i in local else remote[i].result() for i in range(len(specs))]
+            got = _take_figures()
+            for f in remote:
+                got.update(f.result())
+        return [got[i] for i in range(len(specs))]
     finally:
         _WORK = None
 

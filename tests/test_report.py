@@ -351,3 +351,41 @@ def test_outage_shading_one_collection():
         xs = np.array(d["x"], float)
         assert np.nanmin(xs) == 10.0 and np.nanmax(xs) == 90.0
         assert np.isnan(xs).sum() == len(windows)
+
+
+
+@pytest.mark.parametrize("workers", [0, 1, 2])
+def test_figures_shared_queue_largest_first(monkeypatch, workers):
+    """Every figure is drawn exactly once, by whichever process takes it next from the shared
+    queue (largest first), and the PNG bytes come back in the order of the specs."""
+    import multiprocessing
+    import os
+    import time
+    from types import SimpleNamespace
+
+    import insgnss.report as rep
+
+    if workers and "fork" not in multiprocessing.get_all_start_methods():
+        pytest.skip("figure workers need fork")
+    sizes = [1, 12, 2, 5, 3, 3, 4]  # panels per figure, two traces each
+    specs = [SimpleNamespace(panels=[SimpleNamespace(traces=[0, 0])] * n) for n in sizes]
+    assert [rep.figure_cost(s) for s in specs] == [4, 54, 9, 22, 13, 13, 18]
+
+    def fake_figure(i):  # forked workers inherit the patch
+        start = time.perf_counter()
+        time.sleep(0.005 * sizes[i])
+        return f"{i} {os.getpid()} {start!r}".encode()
+
+    monkeypatch.setattr(rep, "_figure", fake_figure)
+    monkeypatch.setattr(rep, "figure_workers", lambda n: workers)
+    seen = []
+    pngs = rep._draw_figures(specs, [[] for _ in specs], lambda: seen.append("interactive"))
+    assert seen == ["interactive"] and rep._WORK is None
+    rows = [p.decode().split() for p in pngs]
+    assert [int(r[0]) for r in rows] == list(range(len(specs)))
+    pids = {int(r[1]) for r in rows}
+    assert len(pids) <= workers + 1
+    if workers == 0:  # one process: strictly largest first, ties in the order of the specs
+        assert pids == {os.getpid()}
+        starts = [float(r[2]) for r in rows]
+        assert sorted(range(len(specs)), key=starts.__getitem__) == [1, 3, 6, 4, 5, 2, 0]
