@@ -155,3 +155,21 @@ def test_cli_exits_3_with_a_clear_message(tmp_path):
     assert s["complete"] is False and s["stopped_at"] is not None
     fwd = pd.read_csv(out / "forward.csv")
     assert fwd["time"].iloc[-1] == pytest.approx(s["stopped_at"])
+
+
+def test_runaway_window_median_equals_numpy():
+    """The runaway-NIS window median (an insertion sort of at most 64 values) is the value
+    ``np.median`` gives, odd and even counts, ties and infinite NIS included."""
+    from insgnss.filter.health import _small_median
+
+    rng = np.random.default_rng(5)
+    for n in range(1, 65):
+        for _ in range(5):
+            v = rng.chisquare(3, n) / 3
+            if n > 3:
+                v[rng.integers(0, n, 2)] = np.inf  # a non-finite NIS is pushed as inf
+                v[rng.integers(0, n)] = v[0]  # a tie
+            got = _small_median(v.copy(), n)
+            assert got == np.median(v), (n, got, np.median(v))
+    buf = np.array([3.0, 1.0, 2.0, 9.0, 7.0])
+    assert _small_median(buf, 4) == 2.5 and list(buf[:4]) == [1.0, 2.0, 3.0, 9.0]
