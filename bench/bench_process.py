@@ -10,7 +10,9 @@ times real time) and the size of what it wrote. Modes:
 - **warm**: the package's numba cache is filled by one untimed run first; the median of
   ``--repeat`` runs is reported;
 - **cold**: one run with an empty temporary ``NUMBA_CACHE_DIR`` (every kernel compiled; the
-  package's cache is not touched);
+  package's cache is not touched); the compile time of each kernel is printed (numba's
+  compile events, exclusive of the callees compiled meanwhile, with the number of
+  specialisations);
 - **no report**: one warm run with ``--no-report``.
 
 Data sets:
@@ -111,6 +113,23 @@ import atexit, importlib, json, os, sys, time
 t0 = time.perf_counter()
 marks = {}
 atexit.register(lambda: open(os.environ["BENCH_MARKS"], "w").write(json.dumps(marks)))
+if os.environ.get("BENCH_COMPILE"):  # compile time per kernel (numba's compile events)
+    from numba.core import event as _ev
+    _stack, _comp = [], {}
+    class _Compile(_ev.Listener):
+        def on_start(self, e):
+            f = e.data["dispatcher"].py_func
+            _stack.append([f"{f.__module__}.{f.__qualname__}", time.perf_counter(), 0.0])
+        def on_end(self, e):
+            name, start, inner = _stack.pop()
+            dt = time.perf_counter() - start
+            if _stack:
+                _stack[-1][2] += dt
+            c = _comp.setdefault(name, [0.0, 0])
+            c[0] += dt - inner  # exclusive: the callees compiled meanwhile are their own
+            c[1] += 1
+    _ev.register("numba:compile", _Compile())
+    marks["compile"] = _comp
 import insgnss.cli, insgnss.pipeline
 marks["import"] = time.perf_counter() - t0
 
@@ -203,6 +222,8 @@ def process(job: Path, *, cold: bool = False, report: bool = True) -> Run:
             ([] if report else ["--no-report"])
         env = child_env(None if cache is None else str(cache))
         env["BENCH_MARKS"] = str(marks)
+        if cold:
+            env["BENCH_COMPILE"] = "1"
         wall, rss, code, err, cpu = run_child(argv, env, cwd=tmp)
         marks = json.loads(marks.read_text()) if marks.exists() else {}
         summary = {}
@@ -306,6 +327,19 @@ def print_breakdown(warm: dict) -> None:
     print(f"  {'wall':42s} {warm['wall']:6.2f}")
 
 
+def print_compile(cold: dict, top: int = 15) -> None:
+    """Compile time per kernel of the cold run (wall s, exclusive of the callees compiled
+    meanwhile; numba's ``numba:compile`` events), largest first; ``xN``: specialisations."""
+    comp = (cold or {}).get("marks", {}).get("compile") or {}
+    if not comp:
+        return
+    total = sum(v[0] for v in comp.values())
+    print(f"\ncompile, {cold['name']} cold: {total:.1f} s in {len(comp)} functions "
+          f"(wall, exclusive); the largest:")
+    for name, (sec, n) in sorted(comp.items(), key=lambda kv: -kv[1][0])[:top]:
+        print(f"  {sec:6.2f} s  x{n}  {name}")
+
+
 def kfgins_baseline() -> None:
     exe = shutil.which("KF-GINS") or shutil.which("kf-gins")
     if exe is None:
@@ -362,6 +396,7 @@ def main() -> None:
         rows += [warm, noreport, cold]
         print_table([warm, noreport, cold])
         print_breakdown(warm)
+        print_compile(cold)
     print("\nall runs:")
     print_table(rows)
     print(f"load average at the end {' '.join(f'{x:.2f}' for x in os.getloadavg())}")

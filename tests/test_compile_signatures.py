@@ -93,7 +93,7 @@ print(json.dumps({
 """
 
 
-def test_vectorised_earth_helpers_compile_once(tmp_path):
+def test_vectorised_earth_functions_compile_once(tmp_path):
     """``geodetic_to_ecef`` / ``enu_displacement_to_geodetic`` compile one specialisation
     whatever their callers pass (read-only pandas columns, column slices, scalars,
     broadcasting shapes), with unchanged values."""
