@@ -360,8 +360,12 @@ def _figure(i: int) -> bytes:
 
 def figure_cost(spec) -> int:
     """Relative drawing cost of a figure: its axes (each with its ticks, labels and text,
-    where matplotlib spends most of the time) and its traces."""
-    return 4 * len(spec.panels) + sum(len(p.traces) for p in spec.panels) // 4
+    where matplotlib spends most of the time), its traces, and for a colour-coded line its
+    colour bar (a further axes) and segment collection (the track costs as much as a
+    six-panel figure)."""
+    traces = [tr for p in spec.panels for tr in p.traces]
+    colour = sum(getattr(tr, "kind", None) == "colorline" for tr in traces)
+    return 4 * len(spec.panels) + len(traces) // 4 + 16 * colour
 
 
 def _take_figures() -> dict[int, bytes]:
