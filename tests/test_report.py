@@ -370,6 +370,9 @@ def test_figures_shared_queue_largest_first(monkeypatch, workers):
     sizes = [1, 12, 2, 5, 3, 3, 4]  # panels per figure, two traces each
     specs = [SimpleNamespace(panels=[SimpleNamespace(traces=[0, 0])] * n) for n in sizes]
     assert [rep.figure_cost(s) for s in specs] == [4, 54, 9, 22, 13, 13, 18]
+    track = SimpleNamespace(panels=[SimpleNamespace(traces=[SimpleNamespace(kind="colorline")]
+                                                    + [SimpleNamespace(kind="line")] * 7)])
+    assert rep.figure_cost(track) == 4 + 2 + 16  # the colour bar and the segments
 
     def fake_figure(i):  # forked workers inherit the patch
         start = time.perf_counter()
