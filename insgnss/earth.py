@@ -265,6 +265,9 @@ def transport_rate_l(lat, h, vel):
     )
 
 
+_SCALARS = (float, int, np.floating, np.integer)
+
+
 def _vector_args(*xs) -> tuple[tuple[np.ndarray, ...], tuple | None]:
     """The arguments of a vectorised kernel as 1-D C-contiguous writable float64 arrays of
     their broadcast shape, and that shape (``None`` when every argument is a scalar).
@@ -275,6 +278,8 @@ def _vector_args(*xs) -> tuple[tuple[np.ndarray, ...], tuple | None]:
     compiled three to four times on a cold cache (about 1 s each). One argument type, one
     compile; the values are the same.
     """
+    if all(isinstance(x, _SCALARS) for x in xs):  # the common per-epoch call, fast
+        return tuple(np.array([x], dtype=np.float64) for x in xs), None
     arrs = np.broadcast_arrays(*(np.asarray(x, dtype=np.float64) for x in xs))
     shape = arrs[0].shape
     flat = tuple(np.require(a.reshape(-1), np.float64, ["C", "W"]) for a in arrs)
