@@ -742,10 +742,11 @@ SCHEMA: dict[str, Any] = {
                             choices=["gauss_markov", "random_walk", "random_constant"]),
         "scale_factors": _spec(bool, False, "estimate IMU scale factors"),
         "smoother": _spec(bool, True, "RTS smoother after the forward filter"),
-        "store_memory_mb": _spec(_NUM, 1024.0, "memory [MiB] for the smoother's per-epoch store "
-                                 "(covariances, transitions, update rows); beyond it the store "
-                                 "is memory-mapped in the output folder (or the temporary "
-                                 "folder), same numbers", check=_number(1.0, 1.0e7)),
+        "store_memory_mb": _spec(_NUM, 64.0, "memory [MiB] for the engine's stored arrays (the "
+                                 "smoother's per-epoch store, the IMU-rate forward and smoothed "
+                                 "tables); beyond it they are memory-mapped in the output folder "
+                                 "(or the temporary folder) and read in blocks, same numbers",
+                                 check=_number(1.0, 1.0e7)),
         "coning": _spec(bool, False, "two-sample coning/sculling correction of the increments "
                         "(strapdown and foot; for integrated increments, not for the exact "
                         "duals a simulation makes)"),

@@ -371,19 +371,32 @@ def innovation_groups(inn: pd.DataFrame, mtype: str) -> list[tuple]:
     return out
 
 
-def output_table(result, df: pd.DataFrame) -> pd.DataFrame:
+def output_table(result, df) -> pd.DataFrame:
     """``df`` (a solution or the reference of ``result``) at the run's trajectory output rate
     (``[outputs] rate_hz``), keeping the samples around the GNSS and control-point epochs, as
-    the trajectory files are written (:func:`insgnss.io.native.decimate_table`)."""
-    from .io.native import decimate_table
+    the trajectory files are written (:func:`insgnss.io.native.decimation_rows`). A solution
+    held as arrays (:class:`insgnss.filter.store.Table`, possibly memory-mapped) gives only
+    those rows, read in blocks."""
+    from .filter.store import select_rows
+    from .io.native import decimation_rows
 
     job = getattr(result, "job", None)
     if job is None:
-        return df
+        return select_rows(df, lambda t: None)
     inputs = result.inputs
     epochs = [x.index for x in (getattr(inputs, "gnss", None),
                                 getattr(inputs, "control_points", None)) if x is not None]
-    return decimate_table(df, job["outputs"]["rate_hz"], epochs, job["process"]["preset"])
+    return select_rows(df, lambda t: decimation_rows(t, job["outputs"]["rate_hz"], epochs,
+                                                     job["process"]["preset"]))
+
+
+def _bracketing_rows(ts: np.ndarray, times: np.ndarray) -> np.ndarray:
+    """Sorted rows of the samples ``ts`` on either side of each of ``times`` (all a linear
+    interpolation at ``times`` or a match within 1 us needs: :func:`sample_at`)."""
+    if not ts.size:
+        return np.empty(0, np.int64)
+    j = np.searchsorted(ts, np.asarray(times, float), side="right")
+    return np.unique(np.clip(np.concatenate([j - 1, j]), 0, ts.size - 1))
 
 
 def build_report_data(result) -> ReportData:
@@ -409,11 +422,13 @@ def build_report_data(result) -> ReportData:
             notes.append(f"The reference has no {' or '.join(missing)}: "
                          f"{' and '.join(missing)} are shown by the filter's sigmas and the "
                          "forward-minus-smoothed difference.")
+    from .filter.store import select_rows, solution_table
+
     for name in ("forward", "smoothed"):
-        tab = getattr(f, name, None)
-        if tab is None or not len(tab):
+        full = solution_table(f, name)
+        if full is None or not len(full):
             continue
-        sd = SolutionData(name, output_table(result, tab))
+        sd = SolutionData(name, output_table(result, full))
         ev = result.evaluation.get(name)
         if ev:
             err = ev["errors"]
@@ -422,6 +437,10 @@ def build_report_data(result) -> ReportData:
 
                 err = err[match_times(err.index.to_numpy(float),
                                       ref.index.to_numpy(float)) >= 0]
+            # the solution rows around the evaluated epochs (not the whole log)
+            at = err.index.to_numpy(float) if ref is None else \
+                np.union1d(err.index.to_numpy(float), ref.index.to_numpy(float))
+            tab = select_rows(full, lambda t, at=at: _bracketing_rows(t, at))
             err = err[["east", "north", "up", "horizontal"]
                       + [c for c in ("east_std", "north_std", "up_std")
                          if c in err.columns]].copy()

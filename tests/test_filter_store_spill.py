@@ -82,3 +82,53 @@ def test_spilled_store_gives_the_same_results(tmp_path, high_rate):
     pd.testing.assert_frame_equal(mem.smoothed, mapped.smoothed, check_exact=True)
     np.testing.assert_array_equal(mem.P_smoothed, mapped.P_smoothed)
     pd.testing.assert_frame_equal(mem.innovations, mapped.innovations, check_exact=True)
+    # the IMU-rate tables come from the same allocator: mapped too, same numbers
+    assert _mapped(mapped.forward_array) and _mapped(mapped.smoothed_array)
+    assert not _mapped(mem.forward_array)
+
+
+def _resident_mib() -> float:
+    with open("/proc/self/statm") as f:
+        return int(f.read().split()[1]) * os.sysconf("SC_PAGE_SIZE") / 2.0**20
+
+
+@pytest.mark.skipif(not os.path.exists("/proc/self/statm"), reason="needs /proc (Linux)")
+def test_release_gives_back_the_pages_and_keeps_the_contents(tmp_path):
+    from insgnss.io.spill import blocks, is_mapped, release
+
+    alloc = SpillAllocator(0.0, tmp_path)
+    a = alloc((200_000, 40), float)  # 61 MiB, mapped
+    assert is_mapped(a) and is_mapped(a[10:20, 3]) and not is_mapped(np.ones(3))
+    before = _resident_mib()
+    a[:] = np.arange(40.0)
+    a[:, 0] = np.arange(200_000.0)
+    grown = _resident_mib()
+    assert grown - before > 50  # written pages are resident
+    release(a, 0, 100_000)
+    half = _resident_mib()
+    assert 20 < grown - half < 40  # about half of them given back
+    release(a[:, 5])  # a column view: the pages of all its rows
+    assert _resident_mib() - before < 5
+    assert a[123_456, 0] == 123_456.0 and a[7, 39] == 39.0  # read back from the file
+    assert a[:, 0].sum() == 200_000 * 199_999 / 2
+    release(np.ones((10, 3)))  # in memory: nothing happens
+    assert list(blocks(10, 8, 24)) == [(0, 3), (3, 6), (6, 9), (9, 10)]
+    assert list(blocks(0, 8)) == []
+
+
+def test_table_take_reads_rows_and_columns_in_blocks(tmp_path, monkeypatch):
+    from insgnss.filter.store import Table
+    from insgnss.io import spill
+
+    monkeypatch.setattr(spill, "BLOCK_BYTES", 1000)  # many blocks
+    alloc = SpillAllocator(0.0, tmp_path)
+    v = alloc((1000, 4), float)
+    v[:] = np.arange(4000.0).reshape(1000, 4)
+    tab = Table(np.arange(1000) * 0.01, v, ["a", "b", "c", "d"])
+    rows = np.array([0, 31, 32, 500, 999])
+    part = tab.take(rows, ["d", "b"])
+    assert list(part.columns) == ["b", "d"]  # the table's order
+    np.testing.assert_array_equal(part.to_numpy(), v[rows][:, [1, 3]])
+    np.testing.assert_array_equal(part.index.to_numpy(), rows * 0.01)
+    pd.testing.assert_frame_equal(tab.take(), tab.frame(), check_exact=True)
+    assert len(tab) == 1000

@@ -669,6 +669,7 @@ def run_engine(model: ProcessModelBase, measurements: list[Measurement], config:
                 x = np.zeros(n)
             store.close(node, te, Phi, Pp, P, fb, model.params())
             model.close_epoch(node, te)
+            model.release_rows()
             run.timing["updates"] += perf() - c0
             completed, node = e, node + 1
     except FilterHealthError as exc:

@@ -105,6 +105,10 @@ class ProcessModelBase:
     def close_epoch(self, node: int, time: float) -> None:
         raise NotImplementedError
 
+    def release_rows(self) -> None:
+        """After an epoch: give back memory of output rows already written (a memory-mapped
+        table, :func:`insgnss.io.spill.release`); nothing by default."""
+
     def output(self, store, n_nodes: int, n_rows: int, smoothed=None):
         raise NotImplementedError
 

@@ -48,7 +48,7 @@ from __future__ import annotations
 import numpy as np
 import pandas as pd
 
-__all__ = ["NodeStore", "InnovationLog", "Table", "innovation_tables"]
+__all__ = ["NodeStore", "InnovationLog", "Table", "innovation_tables", "select_rows", "solution_table"]
 
 
 class NodeStore:
@@ -247,14 +247,81 @@ def innovation_tables(log: InnovationLog | None, c: dict | None = None
 class Table:
     """An IMU-rate output table held as arrays (``time`` (N,), ``values`` (N, C), ``columns``):
     the DataFrame is built on the first call of :meth:`frame`, so callers that read the arrays
-    (the foot-mounted INS, its threshold selection) never pay for it."""
+    (the foot-mounted INS, its threshold selection, the job's writers and evaluation) never pay
+    for it.
+
+    ``values`` may lie on a memory-mapped file (:mod:`insgnss.io.spill`, beyond ``[filter]
+    store_memory_mb``): :meth:`take` and :meth:`blocks` then read it block by block and give
+    each block's pages back after use, so a whole-log table is never resident at once."""
 
     def __init__(self, time: np.ndarray, values: np.ndarray, columns: list[str]):
         self.time, self.values, self.columns = time, values, list(columns)
         self._frame: pd.DataFrame | None = None
+
+    def __len__(self) -> int:
+        return int(self.time.shape[0])
 
     def frame(self) -> pd.DataFrame:
         if self._frame is None:
             self._frame = pd.DataFrame(self.values, index=pd.Index(self.time, name="time"),
                                        columns=self.columns, copy=False)
         return self._frame
+
+    def blocks(self):
+        """Row ranges ``(i, j)`` of about :data:`insgnss.io.spill.BLOCK_BYTES`; the pages of
+        a mapped block are given back when the next one is asked for."""
+        from ..io.spill import blocks, release
+
+        for i, j in blocks(len(self), self.values[:1].nbytes or 8):
+            yield i, j
+            release(self.values, i, j)
+
+    def take(self, rows: np.ndarray | None = None, columns=None) -> pd.DataFrame:
+        """The rows ``rows`` (sorted row numbers; None: all) and ``columns`` (names; None:
+        all) as a DataFrame in memory, read block by block (:meth:`blocks`); the table's own
+        frame when it has been built and everything is asked for."""
+        cols = self.columns if columns is None else [c for c in self.columns if c in columns]
+        if rows is None and columns is None and self._frame is not None:
+            return self._frame
+        idx = [self.columns.index(c) for c in cols]
+        full = idx == list(range(len(self.columns)))
+        n_out = len(self) if rows is None else int(np.asarray(rows).size)
+        out = np.empty((n_out, len(idx)))
+        if rows is None:
+            for i, j in self.blocks():
+                out[i:j] = self.values[i:j] if full else self.values[i:j][:, idx]
+            t = self.time.copy()
+        else:
+            rows = np.asarray(rows, np.int64)
+            for i, j in self.blocks():
+                a, b = np.searchsorted(rows, (i, j))
+                if b > a:
+                    sel = self.values[rows[a:b]]
+                    out[a:b] = sel if full else sel[:, idx]
+            t = self.time[rows]
+        return pd.DataFrame(out, index=pd.Index(t, name="time"), columns=cols, copy=False)
+
+
+def solution_table(result, name: str):
+    """The ``forward`` or ``smoothed`` table of a filter result as it is held: a
+    :class:`Table` (arrays, possibly memory-mapped) where the result keeps one
+    (``FilterResult.forward_table``), else its DataFrame (or None)."""
+    tab = getattr(result, f"{name}_table", None)
+    return tab if tab is not None else getattr(result, name, None)
+
+
+def select_rows(table, rows_of, columns=None) -> pd.DataFrame | None:
+    """A DataFrame of the rows ``rows_of(times)`` (sorted row numbers, or None for all) of a
+    solution table (:func:`solution_table`) and its ``columns`` (None: all). A :class:`Table`
+    is read in blocks into memory; every row of a memory-mapped table gives its frame on the
+    mapping instead of a copy (a DataFrame is sliced as it is)."""
+    if table is None:
+        return None
+    if isinstance(table, Table):
+        rows = rows_of(table.time)
+        if rows is None and columns is None:
+            return table.frame()
+        return table.take(rows, columns)
+    rows = rows_of(table.index.to_numpy(float))
+    df = table if rows is None else table.iloc[rows]
+    return df if columns is None else df[[c for c in df.columns if c in columns]]

@@ -36,6 +36,7 @@ from .. import earth
 from ..columns import STD_COLS
 from ..errors import InvalidValueError
 from ..imu import coning_sculling, grade, increments
+from ..io.spill import BLOCK_BYTES, blocks, is_mapped, release
 from ..mechanization.strapdown import NAV_COLS, STEP_WORK_SHAPE, NavState, attitude_update_id
 from . import kernels
 from .measurements import NominalState
@@ -161,6 +162,9 @@ class StrapdownModel(ProcessModelBase):
         self._nav.layout = layout
         self._nav.gyro_psd = pm.gyro_psd
         self._nav_time = None
+        # the IMU-rate tables: in memory up to the job's budget, else mapped (io/spill.py)
+        self._allocate = np.empty if config.store_allocate is None else config.store_allocate
+        self._released = 0  # forward-table rows whose pages were given back
 
     # --- engine calls -------------------------------------------------------------------------
     def prepare(self, epochs: np.ndarray, dense=None) -> None:
@@ -169,7 +173,11 @@ class StrapdownModel(ProcessModelBase):
         interval to :meth:`propagate`)."""
         t = self.t
         n = self.layout.n
-        self.table = np.empty((t.size, len(output_columns(self.layout))))
+        self.table = self._allocate((t.size, len(output_columns(self.layout))), float)
+        self._released = 0
+        # rows written between two releases of a mapped table's pages (:meth:`release_rows`)
+        self._release_step = (max(1, BLOCK_BYTES // self.table[:1].nbytes)
+                              if is_mapped(self.table) else t.size + 1)
         self.seg = np.zeros(t.size, np.int64)
         self.post = np.zeros(t.size, np.bool_)
         gaps = np.diff(epochs)
@@ -271,6 +279,15 @@ class StrapdownModel(ProcessModelBase):
             self.seg[j - 1], self.post[j - 1] = node, True
         self._nav_time = None
 
+    def release_rows(self) -> None:
+        """Give back the pages of the forward-table rows written so far when the table is
+        memory-mapped (:func:`insgnss.io.spill.release`; the contents stay in the file): the
+        resident part of a long log's table stays at about one block during the pass."""
+        j = self.j - 1
+        if j - self._released >= self._release_step:
+            release(self.table, self._released, j)
+            self._released = j
+
     def output(self, store, n_nodes: int, n_rows: int, smoothed=None) -> Table:
         """IMU-rate forward table (``smoothed=None``: completes the stored nominal table in
         place) or smoothed table (``(xs_plus, xs_minus, Ps or None, xs_hr)``: a new table; the
@@ -282,22 +299,25 @@ class StrapdownModel(ProcessModelBase):
         hr_node = np.searchsorted(store.seg1[:n_nodes], np.arange(n_hr), side="right")
         if smoothed is None:
             out = self.table
-            if n_rows:
-                X = np.zeros((1, self.layout.n))  # unused: no correction
-                kernels.assemble_output(t, self.table, self.seg, self.post, store.t[:n_nodes],
-                                        store.Pf, store.Pp, X, X, store.par, n_rows, False, out,
-                                        X, hr_node)
+            X = xs_hr = np.zeros((1, self.layout.n))  # unused: no correction
+            P0 = P1 = None
+            Xp = Xm = X
         else:
-            out = np.empty((n_rows, len(cols)))
-            if n_rows:
-                xs_plus, xs_minus, Ps, xs_hr = smoothed
-                P = store.Pf if Ps is None else Ps
-                kernels.assemble_output(t, self.table, self.seg, self.post, store.t[:n_nodes], P,
-                                        P, xs_plus, xs_minus, store.par, n_rows, True, out,
-                                        xs_hr, hr_node)
-                if Ps is None:
-                    out[:, 9:18] = np.nan
-                    out[:, 18 + self.n_par:] = np.nan
+            out = self._allocate((n_rows, len(cols)), float)
+            Xp, Xm, Ps, xs_hr = smoothed
+            P0 = P1 = store.Pf if Ps is None else Ps
+        if smoothed is None:
+            P0, P1 = store.Pf, store.Pp
+        # in row blocks: a block's pages of mapped tables are given back after it (spill.py)
+        for i, j in blocks(n_rows, self.table[:1].nbytes):
+            kernels.assemble_output(t[i:j], self.table[i:j], self.seg[i:j], self.post[i:j],
+                                    store.t[:n_nodes], P0, P1, Xp, Xm, store.par, j - i,
+                                    smoothed is not None, out[i:j], xs_hr, hr_node)
+            if smoothed is not None and Ps is None:
+                out[i:j, 9:18] = np.nan
+                out[i:j, 18 + self.n_par:] = np.nan
+            release(self.table, i, j)
+            release(out, i, j)
         return Table(t[:n_rows], out[:n_rows], cols)
 
     def final_state(self, time: float) -> NavState:

@@ -10,11 +10,22 @@ pages it in and out). The numbers are the same either way (float64 in both).
 The file of a mapped array is removed right after it is mapped where the system allows it
 (POSIX: the mapping stays valid and its disk space is freed with the array); elsewhere it is
 removed when the array is released.
+
+Resident pages
+--------------
+A mapped page that was written or read stays in the process's resident memory until the
+mapping goes, however long ago it was used. :func:`release` gives back the pages of a range
+of rows of a mapped array (``madvise(MADV_DONTNEED)`` on the shared file mapping: the
+contents stay in the file and the system's page cache, and a later access reads them back);
+on an array in memory it does nothing. Code that walks a long mapped array in blocks
+(:func:`blocks`) releases each block after use, so the resident part stays at about one block
+whatever the length of the log. The numbers are not affected.
 """
 
 from __future__ import annotations
 
 import math
+import mmap
 import os
 import tempfile
 import weakref
@@ -22,10 +33,14 @@ from pathlib import Path
 
 import numpy as np
 
-__all__ = ["SPILL_PREFIX", "SpillAllocator"]
+__all__ = ["BLOCK_BYTES", "SPILL_PREFIX", "SpillAllocator", "blocks", "is_mapped", "release"]
 
 #: prefix of the mapped files (hidden; removed at once on POSIX)
 SPILL_PREFIX = ".insgnss-store-"
+
+#: bytes per block of :func:`blocks` (a few MiB: large enough for vectorised work, small
+#: against the arrays of a long log)
+BLOCK_BYTES = 8 << 20
 
 
 def _remove(path: str) -> None:
@@ -71,3 +86,55 @@ class SpillAllocator:
             weakref.finalize(mm, _remove, path)
         self.spilled += nbytes
         return mm.view(np.ndarray)  # a plain array on the mapping (compiled code takes it)
+
+
+def _mapping(a: np.ndarray) -> mmap.mmap | None:
+    """The ``mmap`` an array's memory belongs to (None for an array in memory)."""
+    x = a
+    while x is not None:
+        if isinstance(x, mmap.mmap):
+            return x
+        x = getattr(x, "base", None)
+    return None
+
+
+def is_mapped(a: np.ndarray) -> bool:
+    """True for an array (or a view of one) on a memory-mapped file of :class:`SpillAllocator`."""
+    return _mapping(a) is not None
+
+
+def release(a: np.ndarray, start: int = 0, stop: int | None = None) -> None:
+    """Give back the resident pages of rows ``start .. stop-1`` of a mapped array (module
+    docstring, "Resident pages"); nothing for an array in memory or where the system has no
+    ``madvise``. The pages the rows touch are released (a neighbouring row sharing a page is
+    read back when next used); the contents are kept."""
+    mm = _mapping(a)
+    advice = getattr(mmap, "MADV_DONTNEED", None)
+    if mm is None or advice is None or a.ndim == 0 or not len(a):
+        return
+    stop = len(a) if stop is None else min(int(stop), len(a))
+    start = max(int(start), 0)
+    if stop <= start:
+        return
+    base = np.frombuffer(mm, np.uint8).ctypes.data
+    first = a.ctypes.data - base  # byte offset of a[0] in the mapping
+    extent = a.itemsize + sum((m - 1) * st for m, st in zip(a.shape[1:], a.strides[1:],
+                                                              strict=True))
+    lo = first + start * a.strides[0]
+    hi = first + (stop - 1) * a.strides[0] + extent
+    page = mmap.PAGESIZE
+    lo = lo // page * page
+    hi = min(-(-hi // page) * page, len(mm))
+    if hi > lo:
+        try:
+            mm.madvise(advice, lo, hi - lo)
+        except (OSError, ValueError):
+            pass
+
+
+def blocks(n: int, row_bytes: int, block_bytes: int = BLOCK_BYTES):
+    """Row ranges ``(i, j)`` covering ``0 .. n-1`` in blocks of about ``block_bytes`` bytes of
+    rows of ``row_bytes`` bytes each."""
+    step = max(1, int(block_bytes) // max(int(row_bytes), 1))
+    for i in range(0, int(n), step):
+        yield i, min(i + step, int(n))

@@ -82,10 +82,25 @@ def position_nees(err: pd.DataFrame, windows) -> dict:
     return out
 
 
+#: solution columns the evaluation reads (the attitude only to move the point to the antenna)
+EVAL_COLUMNS = ("lat", "lon", "height", "east_std", "north_std", "up_std")
+ATTITUDE_COLUMNS = ("roll", "pitch", "heading")
+
+
 def evaluate_result(out: JobResult) -> JobResult:
-    """Fill ``out.evaluation`` for the forward and the smoothed solution; returns ``out``."""
+    """Fill ``out.evaluation`` for the forward and the smoothed solution; returns ``out``.
+
+    A solution the engine holds as arrays (:class:`insgnss.filter.store.Table`, possibly
+    memory-mapped beyond ``[filter] store_memory_mb``) is read in blocks, and only the
+    columns the evaluation uses: no whole-log DataFrame of all columns is built."""
+    from ..filter.store import select_rows, solution_table
+
+    if out.inputs.reference is None or not out.job["evaluation"]["enabled"]:
+        return out
+    cols = EVAL_COLUMNS + (ATTITUDE_COLUMNS if out.inputs.reference_point == "antenna" else ())
     for name in ("forward", "smoothed"):
-        ev = evaluate_solution(getattr(out.filter, name), out.inputs, out.windows, out.job)
+        sol = select_rows(solution_table(out.filter, name), lambda t: None, cols)
+        ev = evaluate_solution(sol, out.inputs, out.windows, out.job)
         if ev:
             out.evaluation[name] = ev
     return out

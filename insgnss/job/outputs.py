@@ -8,10 +8,11 @@ import json
 from pathlib import Path
 
 from ..evaluate import move_point
+from ..filter.store import select_rows, solution_table
 from ..io.native import (
     atomic_write,
     atomic_write_text,
-    decimate_table,
+    decimation_rows,
     jsonable,
     select_output_columns,
     write_parquet,
@@ -49,12 +50,20 @@ def write_outputs(result: JobResult, out_dir: str | Path | None = None) -> dict[
     with OutputSet(out, protect=job.input_paths(), stale=OUTPUT_NAMES + (MARKER,)) as outs:
         dest = outs.path
         point = job["outputs"]["point"]
-        tables = {"forward": result.filter.forward, "smoothed": result.filter.smoothed}
         formats = job["outputs"]["formats"]
         # [outputs] rate_hz: the samples around the aiding epochs stay (the forward solution
         # jumps there; insgnss.columns)
         epochs = [x.index for x in (result.inputs.gnss, result.inputs.control_points)
                   if x is not None]
+        rate, preset = job["outputs"]["rate_hz"], job["process"]["preset"]
+
+        def rows_of(t):
+            return decimation_rows(t, rate, epochs, preset)
+
+        # the kept rows only, read in blocks from the engine's arrays (possibly memory-mapped:
+        # no whole-log DataFrame is built; docs/filter.md, Memory)
+        tables = {name: select_rows(solution_table(result.filter, name), rows_of)
+                  for name in ("forward", "smoothed")}
         # the time base of the data, for the UTC time stamps of the KML / GeoJSON tracks
         base = result.inputs.imu.attrs.get("time_base")
         clock = {"time_base": job["job"]["time_base"] if base in (None, "unspecified")
@@ -62,8 +71,6 @@ def write_outputs(result: JobResult, out_dir: str | Path | None = None) -> dict[
         for name, df in tables.items():
             if df is None:
                 continue
-            df = tables[name] = decimate_table(df, job["outputs"]["rate_hz"], epochs,
-                                               job["process"]["preset"])
             if point == "antenna":
                 df = move_point(df, result.inputs.lever_arm)
             table = select_output_columns(df, job["outputs"]["columns"])  # csv, parquet
