@@ -312,7 +312,11 @@ def _clean_rows(path: Path, comment, header, delimiter, trim) -> TextRows | None
                                              ignore_empty_lines=False),
             convert_options=pacsv.ConvertOptions(
                 column_types=dict.fromkeys(names, pa.float64()), null_values=[""],
-                strings_can_be_null=False, quoted_strings_can_be_null=False))
+                strings_can_be_null=False, quoted_strings_can_be_null=False),
+            # the system allocator: the parse buffers (about the size of the file) go back
+            # to the system when the table is freed, where pyarrow's default pool (mimalloc)
+            # keeps much of them even after release_unused()
+            memory_pool=pa.system_memory_pool())
     except (pa.ArrowInvalid, pa.ArrowTypeError, ValueError):
         return None
     n = tab.num_rows
@@ -328,15 +332,25 @@ def _clean_rows(path: Path, comment, header, delimiter, trim) -> TextRows | None
     for j, col in enumerate(tab.columns):
         values[:, j] = (col.fill_null(np.nan) if nulls[j] else col).to_numpy()
     del tab
-    # pyarrow's memory pool keeps the freed parse buffers (about the size of the file) for
-    # reuse; a long log's peak memory is better without them
-    pa.default_memory_pool().release_unused()
+    _trim_heap()
     if b"(" in data and np.isnan(values).any():
         return None  # "nan(...)" is a NaN for pyarrow, not a number for numpy
     lines = _LazyLines(path, comment, header, trim, first, n)
     return TextRows(path, lines, np.arange(first_no, first_no + n, dtype=np.int64), head,
                     head_no, comments, table=values, table_empty=any(nulls),
                     table_delimiter=delimiter)
+
+
+def _trim_heap() -> None:
+    """Give the heap's free memory back to the system (glibc ``malloc_trim``; nothing where
+    the C library has none): the freed parse buffers of a long log's file would otherwise
+    stay in the process until it ends."""
+    import ctypes
+
+    try:
+        ctypes.CDLL(None).malloc_trim(0)
+    except (AttributeError, OSError):
+        pass
 
 
 def _strict_float(cell: str) -> float:

@@ -36,7 +36,7 @@ from .. import earth
 from ..columns import STD_COLS
 from ..errors import InvalidValueError
 from ..imu import coning_sculling, grade, increments
-from ..io.spill import BLOCK_BYTES, blocks, is_mapped, release
+from ..io import spill
 from ..mechanization.strapdown import NAV_COLS, STEP_WORK_SHAPE, NavState, attitude_update_id
 from . import kernels
 from .measurements import NominalState
@@ -176,8 +176,8 @@ class StrapdownModel(ProcessModelBase):
         self.table = self._allocate((t.size, len(output_columns(self.layout))), float)
         self._released = 0
         # rows written between two releases of a mapped table's pages (:meth:`release_rows`)
-        self._release_step = (max(1, BLOCK_BYTES // self.table[:1].nbytes)
-                              if is_mapped(self.table) else t.size + 1)
+        self._release_step = (max(1, spill.BLOCK_BYTES // self.table[:1].nbytes)
+                              if spill.is_mapped(self.table) else t.size + 1)
         self.seg = np.zeros(t.size, np.int64)
         self.post = np.zeros(t.size, np.bool_)
         gaps = np.diff(epochs)
@@ -285,7 +285,7 @@ class StrapdownModel(ProcessModelBase):
         resident part of a long log's table stays at about one block during the pass."""
         j = self.j - 1
         if j - self._released >= self._release_step:
-            release(self.table, self._released, j)
+            spill.release(self.table, self._released, j)
             self._released = j
 
     def output(self, store, n_nodes: int, n_rows: int, smoothed=None) -> Table:
@@ -309,15 +309,15 @@ class StrapdownModel(ProcessModelBase):
         if smoothed is None:
             P0, P1 = store.Pf, store.Pp
         # in row blocks: a block's pages of mapped tables are given back after it (spill.py)
-        for i, j in blocks(n_rows, self.table[:1].nbytes):
+        for i, j in spill.blocks(n_rows, self.table[:1].nbytes):
             kernels.assemble_output(t[i:j], self.table[i:j], self.seg[i:j], self.post[i:j],
                                     store.t[:n_nodes], P0, P1, Xp, Xm, store.par, j - i,
                                     smoothed is not None, out[i:j], xs_hr, hr_node)
             if smoothed is not None and Ps is None:
                 out[i:j, 9:18] = np.nan
                 out[i:j, 18 + self.n_par:] = np.nan
-            release(self.table, i, j)
-            release(out, i, j)
+            spill.release(self.table, i, j)
+            spill.release(out, i, j)
         return Table(t[:n_rows], out[:n_rows], cols)
 
     def final_state(self, time: float) -> NavState:

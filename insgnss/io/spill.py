@@ -132,9 +132,9 @@ def release(a: np.ndarray, start: int = 0, stop: int | None = None) -> None:
             pass
 
 
-def blocks(n: int, row_bytes: int, block_bytes: int = BLOCK_BYTES):
-    """Row ranges ``(i, j)`` covering ``0 .. n-1`` in blocks of about ``block_bytes`` bytes of
-    rows of ``row_bytes`` bytes each."""
-    step = max(1, int(block_bytes) // max(int(row_bytes), 1))
+def blocks(n: int, row_bytes: int, block_bytes: int | None = None):
+    """Row ranges ``(i, j)`` covering ``0 .. n-1`` in blocks of about ``block_bytes`` bytes
+    (default :data:`BLOCK_BYTES`) of rows of ``row_bytes`` bytes each."""
+    step = max(1, int(block_bytes or BLOCK_BYTES) // max(int(row_bytes), 1))
     for i in range(0, int(n), step):
         yield i, min(i + step, int(n))
