@@ -35,8 +35,12 @@ exit and the job loading.
 KF-GINS is timed only when a ``KF-GINS`` executable is on PATH; otherwise the issue's
 figures are printed for reference.
 
+``--stages``: one warm run per data set with the child's resident memory sampled every 4 ms
+and attributed to the stage running (read, forward filter, smoother, output tables,
+evaluation, write and report, the rest of the job), printed as the peak of each stage.
+
 Run: ``python bench/bench_process.py [--repeat 3] [--only sim|drive] [--no-cold]
-[--no-autotune]``. Prints
+[--no-autotune] [--stages]``. Prints
 numbers; not a timed test. The machine has 2 cores shared with other work: say so with the
 numbers (the load average is printed).
 """
@@ -165,6 +169,44 @@ wrapped = timed(write_outputs, "write_outputs")
 for mod in mods:
     if getattr(mod, "write_outputs", None) is original:
         mod.write_outputs = wrapped
+if os.environ.get("BENCH_STAGES"):  # --stages: resident memory sampled per stage
+    import threading
+    page = os.sysconf("SC_PAGE_SIZE") / 2.0**20
+    stack, peaks, order = ["start-up (imports)"], {}, []
+    def rss():
+        with open("/proc/self/statm") as f:
+            return int(f.read().split()[1]) * page
+    def sample():
+        while True:
+            r, s = rss(), stack[-1]
+            if r > peaks.get(s, 0.0):
+                peaks[s] = r
+            time.sleep(0.004)
+    threading.Thread(target=sample, daemon=True).start()
+    def staged(f, name):
+        def wrapper(*a, **k):
+            stack.append(name)
+            if name not in order:
+                order.append(name)
+            try:
+                return f(*a, **k)
+            finally:
+                stack.pop()
+        return wrapper
+    import insgnss.filter.engine as eng, insgnss.filter.strapdown_model as sdm
+    import insgnss.job.processes as procs, insgnss.job.run as jrun
+    jrun.load_inputs = staged(jrun.load_inputs, "read")
+    eng.run_engine = staged(eng.run_engine, "forward filter")
+    eng.smooth = staged(eng.smooth, "smoother (backward pass)")
+    sdm.StrapdownModel.output = staged(sdm.StrapdownModel.output, "output tables")
+    procs.evaluate_result = staged(procs.evaluate_result, "evaluation")
+    for mod in mods:
+        if getattr(mod, "write_outputs", None) is wrapped:
+            mod.write_outputs = staged(wrapped, "write (files, report)")
+    stack.append("job (rest)")
+    order[:0] = ["start-up (imports)", "job (rest)"]
+    peaks["start-up (imports)"] = rss()
+    atexit.register(lambda: marks.update(stages=[(k, peaks.get(k, 0.0)) for k in order]))
 from insgnss.cli import main
 sys.exit(main())
 """
@@ -212,7 +254,8 @@ def run_child(argv: list[str], env: dict, cwd: str | os.PathLike
     return wall, usage.ru_maxrss / 1024.0, proc.returncode, tail, cpu  # ru_maxrss: KiB
 
 
-def process(job: Path, *, cold: bool = False, report: bool = True) -> Run:
+def process(job: Path, *, cold: bool = False, report: bool = True, stages: bool = False
+            ) -> Run:
     """One ``insgnss process`` run into a temporary folder."""
     with tempfile.TemporaryDirectory(prefix="bench-process-") as tmp:
         out = Path(tmp) / "out"
@@ -224,6 +267,8 @@ def process(job: Path, *, cold: bool = False, report: bool = True) -> Run:
         env["BENCH_MARKS"] = str(marks)
         if cold:
             env["BENCH_COMPILE"] = "1"
+        if stages:
+            env["BENCH_STAGES"] = "1"
         wall, rss, code, err, cpu = run_child(argv, env, cwd=tmp)
         marks = json.loads(marks.read_text()) if marks.exists() else {}
         summary = {}
@@ -338,6 +383,14 @@ def print_compile(cold: dict, top: int = 15) -> None:
           f"(wall, exclusive); the largest:")
     for name, (sec, n) in sorted(comp.items(), key=lambda kv: -kv[1][0])[:top]:
         print(f"  {sec:6.2f} s  x{n}  {name}")
+def print_stages(name: str, run: Run) -> None:
+    """Peak resident memory of each stage of one run (``--stages``; sampled every 4 ms in
+    the child, the stage being the innermost one running)."""
+    stages = run.marks.get("stages") or []
+    print(f"\npeak resident memory per stage, {name} (MiB; peak RSS of the run "
+          f"{run.rss_mib:.0f} MiB, wall {run.wall:.2f} s, CPU {run.cpu:.2f} s):")
+    for stage, peak in stages:
+        print(f"  {stage:42s} {peak:7.0f}")
 
 
 def kfgins_baseline() -> None:
@@ -364,6 +417,9 @@ def main() -> None:
     ap.add_argument("--code", type=Path, default=REPO,
                     help="checkout whose insgnss is timed (e.g. another branch; default this "
                     "one); the jobs and the scenario are this checkout's")
+    ap.add_argument("--stages", action="store_true",
+                    help="only one warm run per data set with the resident memory sampled per "
+                    "stage (read, forward filter, smoother, output tables, evaluation, write)")
     args = ap.parse_args()
     global CODE
     CODE = args.code.resolve()
@@ -389,6 +445,9 @@ def main() -> None:
         first = process(job)  # fills the package's numba cache: the warm runs load it
         if first.code not in (0, 3):
             print(f"{name}: failed (exit {first.code}):\n{first.stderr}")
+            continue
+        if args.stages:
+            print_stages(name, process(job, stages=True))
             continue
         warm = describe(name, "warm", [process(job) for _ in range(args.repeat)])
         noreport = describe(name, "no report", [process(job, report=False)])

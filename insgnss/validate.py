@@ -251,22 +251,61 @@ def read_rows(path: str | os.PathLike, *, comment: tuple[str, ...] = ("#",),
     return rows if rows is not None else _split_rows(path, comment, header, trim)
 
 
+#: files larger than this are read and parsed in line-aligned blocks of about this size (bytes)
+READ_BLOCK = 32 << 20
+_WS = b" \t\r\n"
+
+
+def _file_chunks(path: Path, start: int, stop: int, block: int):
+    """Line-aligned chunks (bytes) of ``path[start:stop]`` of about ``block`` bytes."""
+    with open(path, "rb") as f:
+        f.seek(start)
+        left, carry = stop - start, b""
+        while left > 0:
+            buf = f.read(min(block, left))
+            if not buf:
+                break
+            left -= len(buf)
+            buf = carry + buf if carry else buf
+            if left > 0:
+                cut = buf.rfind(b"\n") + 1
+                if cut == 0:
+                    carry = buf
+                    continue
+                buf, carry = buf[:cut], buf[cut:]
+            else:
+                carry = b""
+            yield buf
+        if carry:
+            yield carry
+
+
 def _clean_rows(path: Path, comment, header, delimiter, trim) -> TextRows | None:
-    """:func:`read_rows` on pyarrow, or None when the file is not clean (see above)."""
+    """:func:`read_rows` on pyarrow, or None when the file is not clean (see above).
+
+    A file larger than :data:`READ_BLOCK` is read and parsed block by block (line-aligned),
+    each block straight into the value table: the peak memory is the table plus one block,
+    not the file's bytes, pyarrow's table and the values at once; the values are the same."""
     if delimiter is None or len(delimiter) != 1 or delimiter in " \t\r\n\"" \
             or any(c[0] not in _COMMENT_START for c in comment):
         return None
     try:
-        data = path.read_bytes()
+        size = path.stat().st_size
+        with open(path, "rb") as f:
+            data = f.read(READ_BLOCK if size > READ_BLOCK else -1)  # the head of a large file
+            tail = data
+            if size > READ_BLOCK:
+                f.seek(max(size - (1 << 16), 0))
+                tail = f.read()
     except OSError:
         return None
-    # a lone CR ends a line for pyarrow but not for split_lines
-    if b"\r" in data and data.count(b"\r") != data.count(b"\r\n"):
-        return None
+    whole = len(data) >= size  # all of the file is in ``data``
     # lines before the data: blank, comment and header lines (a few, in Python)
     pos, line, comments, head, head_no = 0, 0, [], None, None
     while True:
         end = data.find(b"\n", pos)
+        if end < 0 and not whole:
+            return None  # a head without its first data line: the validating path
         try:
             text = data[pos:end if end >= 0 else len(data)].decode("utf-8").strip()
         except UnicodeDecodeError:
@@ -288,69 +327,99 @@ def _clean_rows(path: Path, comment, header, delimiter, trim) -> TextRows | None
         if end < 0:
             return None
         start, first_no = end + 1, line + 1
-        stop = data.rfind(b"\n", start, len(data.rstrip(b" \t\r\n")))
+        body = len(tail.rstrip(_WS))
+        if body == 0 and not whole:
+            return None
+        cut = tail.rfind(b"\n", 0, body)
+        if cut < 0 and not whole:
+            return None
+        stop = cut + (size - len(tail))
         if stop <= start:
             return None
     else:
-        stop = len(data)
-    nxt = data.find(b"\n", start, stop)
+        stop = size
+    nxt = data.find(b"\n", start, min(stop, len(data)))
+    if nxt < 0 and not whole:
+        return None
     first = data[start:nxt if nxt >= 0 else stop].decode("utf-8", "replace").strip()
     n_fields = first.count(delimiter) + 1
     if n_fields < 2:  # one column: a blank line would be a row of it
         return None
-    n_lines = data.count(b"\n", start, stop) + (0 if data[stop - 1:stop] == b"\n" else 1)
+
+    def chunks():
+        if whole:
+            yield memoryview(data)[start:stop]
+        else:
+            yield from _file_chunks(path, start, stop, READ_BLOCK)
+
+    def lone_cr(c) -> bool:  # a lone CR ends a line for pyarrow but not for split_lines
+        return b"\r" in c and c.count(b"\r") != c.count(b"\r\n")
+
+    if whole:
+        if lone_cr(data):
+            return None
+        n_lines = data.count(b"\n", start, stop) + (0 if data[stop - 1:stop] == b"\n" else 1)
+        paren = b"(" in data
+    else:  # pass 1 over a large file: the line count and the same checks, block by block
+        if lone_cr(data[:start]) or lone_cr(tail[max(stop - (size - len(tail)), 0):]):
+            return None
+        n_lines, paren, last = 0, False, b"\n"
+        for c in chunks():
+            if lone_cr(c):
+                return None
+            n_lines += c.count(b"\n")
+            paren = paren or b"(" in c
+            last = c[-1:] or last
+        n_lines += 0 if last == b"\n" else 1
     import pyarrow as pa
     import pyarrow.csv as pacsv
 
+    from .io.spill import trim_heap
+
     names = [f"f{i}" for i in range(n_fields)]
-    try:
-        tab = pacsv.read_csv(
-            pa.py_buffer(memoryview(data)[start:stop]),
-            read_options=pacsv.ReadOptions(column_names=names),
-            parse_options=pacsv.ParseOptions(delimiter=delimiter, quote_char=False,
-                                             escape_char=False, newlines_in_values=False,
-                                             ignore_empty_lines=False),
-            convert_options=pacsv.ConvertOptions(
+    opts = {"read_options": pacsv.ReadOptions(column_names=names),
+            "parse_options": pacsv.ParseOptions(delimiter=delimiter, quote_char=False,
+                                                escape_char=False, newlines_in_values=False,
+                                                ignore_empty_lines=False),
+            "convert_options": pacsv.ConvertOptions(
                 column_types=dict.fromkeys(names, pa.float64()), null_values=[""],
                 strings_can_be_null=False, quoted_strings_can_be_null=False),
-            # the system allocator: the parse buffers (about the size of the file) go back
-            # to the system when the table is freed, where pyarrow's default pool (mimalloc)
-            # keeps much of them even after release_unused()
-            memory_pool=pa.system_memory_pool())
-    except (pa.ArrowInvalid, pa.ArrowTypeError, ValueError):
+            # the system allocator: the parse buffers go back to the system when a block's
+            # table is freed, where pyarrow's default pool (mimalloc) keeps much of them
+            "memory_pool": pa.system_memory_pool()}
+    if n_lines == 0:
         return None
-    n = tab.num_rows
+    values = np.empty((n_fields, n_lines)).T  # column-major: each column one contiguous copy
+    r0, any_null = 0, False
+    for c in chunks():  # pass 2: parse block by block into the values
+        try:
+            tab = pacsv.read_csv(pa.py_buffer(c), **opts)
+        except (pa.ArrowInvalid, pa.ArrowTypeError, ValueError):
+            return None
+        m = tab.num_rows
+        if r0 + m > n_lines:
+            return None
+        nulls = [col.null_count for col in tab.columns]
+        if all(nulls):  # a blank line is a row of empty cells for pyarrow; split_lines skips it
+            blank = np.logical_and.reduce([col.is_null().to_numpy(zero_copy_only=False)
+                                           for col in tab.columns])
+            if blank.any():
+                return None
+        any_null = any_null or any(nulls)
+        for j, col in enumerate(tab.columns):
+            values[r0:r0 + m, j] = (col.fill_null(np.nan) if nulls[j] else col).to_numpy()
+        r0 += m
+        del tab
+    trim_heap()
+    n = r0
     if n != n_lines or n == 0:
         return None
-    nulls = [col.null_count for col in tab.columns]
-    if all(nulls):  # a blank line is a row of empty cells for pyarrow; split_lines skips it
-        blank = np.logical_and.reduce([c.is_null().to_numpy(zero_copy_only=False)
-                                       for c in tab.columns])
-        if blank.any():
-            return None
-    values = np.empty((n_fields, n)).T  # column-major: each column one contiguous copy
-    for j, col in enumerate(tab.columns):
-        values[:, j] = (col.fill_null(np.nan) if nulls[j] else col).to_numpy()
-    del tab
-    _trim_heap()
-    if b"(" in data and np.isnan(values).any():
+    if paren and np.isnan(values).any():
         return None  # "nan(...)" is a NaN for pyarrow, not a number for numpy
     lines = _LazyLines(path, comment, header, trim, first, n)
     return TextRows(path, lines, np.arange(first_no, first_no + n, dtype=np.int64), head,
-                    head_no, comments, table=values, table_empty=any(nulls),
+                    head_no, comments, table=values, table_empty=any_null,
                     table_delimiter=delimiter)
-
-
-def _trim_heap() -> None:
-    """Give the heap's free memory back to the system (glibc ``malloc_trim``; nothing where
-    the C library has none): the freed parse buffers of a long log's file would otherwise
-    stay in the process until it ends."""
-    import ctypes
-
-    try:
-        ctypes.CDLL(None).malloc_trim(0)
-    except (AttributeError, OSError):
-        pass
 
 
 def _strict_float(cell: str) -> float:

@@ -3,7 +3,9 @@
 A clean file must give exactly the tables the validating path gives (same floats, same line
 numbers, same attrs); any damaged file must give exactly the same error (type and message:
 file, line, column, expected, found) or the same table, whichever path parses it. Each
-comparison runs a reader twice: as is, and with the fast path switched off.
+comparison runs a reader twice: as is, and with the fast path switched off. Every test runs
+twice: with the file read whole, and read and parsed in small line-aligned blocks (the path of
+a file larger than ``validate.READ_BLOCK``).
 """
 
 from __future__ import annotations
@@ -22,6 +24,14 @@ import insgnss.validate as validate
 from insgnss.errors import InsgnssError
 from insgnss.io import read_imu_csv, read_rtklibexplorer_imu, read_trajectory_csv
 from insgnss.io.tracks import write_trajectory_csv
+
+
+@pytest.fixture(autouse=True, params=["whole", "blocks"])
+def read_block(request, monkeypatch):
+    """Files read whole (the default block is far above these files) or in 700-byte blocks."""
+    if request.param == "blocks":
+        monkeypatch.setattr(validate, "READ_BLOCK", 700)
+    return request.param
 
 
 @pytest.fixture

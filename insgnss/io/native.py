@@ -150,8 +150,17 @@ def file_batches(df: pd.DataFrame, rows: int | None = None, index_name: str = "t
                 for a, is_angle in zip(arrays, angle, strict=True)]
         return pa.RecordBatch.from_arrays(cols, names=names)
 
+    def batches():
+        from .spill import release
+
+        for i in range(0, max(len(df), 1), rows):
+            j = min(i + rows, len(df))
+            yield batch(i, j)
+            for a in arrays:  # a memory-mapped table (io/spill.py): its pages go back
+                release(a, i, j)
+
     schema = batch(0, 0).schema
-    return schema, (batch(i, min(i + rows, len(df))) for i in range(0, max(len(df), 1), rows))
+    return schema, batches()
 
 
 def csv_writer(df: pd.DataFrame, index_name: str | None = None) -> Callable[[Path], None]:

@@ -33,7 +33,8 @@ from pathlib import Path
 
 import numpy as np
 
-__all__ = ["BLOCK_BYTES", "SPILL_PREFIX", "SpillAllocator", "blocks", "is_mapped", "release"]
+__all__ = ["BLOCK_BYTES", "SPILL_PREFIX", "SpillAllocator", "blocks", "is_mapped", "release",
+           "trim_heap"]
 
 #: prefix of the mapped files (hidden; removed at once on POSIX)
 SPILL_PREFIX = ".insgnss-store-"
@@ -138,3 +139,15 @@ def blocks(n: int, row_bytes: int, block_bytes: int | None = None):
     step = max(1, int(block_bytes or BLOCK_BYTES) // max(int(row_bytes), 1))
     for i in range(0, int(n), step):
         yield i, min(i + step, int(n))
+
+
+def trim_heap() -> None:
+    """Give the C heap's free memory back to the system (glibc ``malloc_trim``; nothing where
+    the C library has none). After a stage that freed large temporaries (a reader's parse
+    buffers, the evaluation's), the freed memory would otherwise stay in the process."""
+    import ctypes
+
+    try:
+        ctypes.CDLL(None).malloc_trim(0)
+    except (AttributeError, OSError):
+        pass

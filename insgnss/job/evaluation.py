@@ -94,6 +94,7 @@ def evaluate_result(out: JobResult) -> JobResult:
     memory-mapped beyond ``[filter] store_memory_mb``) is read in blocks, and only the
     columns the evaluation uses: no whole-log DataFrame of all columns is built."""
     from ..filter.store import select_rows, solution_table
+    from ..io.spill import trim_heap
 
     if out.inputs.reference is None or not out.job["evaluation"]["enabled"]:
         return out
@@ -101,6 +102,8 @@ def evaluate_result(out: JobResult) -> JobResult:
     for name in ("forward", "smoothed"):
         sol = select_rows(solution_table(out.filter, name), lambda t: None, cols)
         ev = evaluate_solution(sol, out.inputs, out.windows, out.job)
+        del sol
+        trim_heap()  # the solution's columns and the temporaries go back to the system
         if ev:
             out.evaluation[name] = ev
     return out
