@@ -19,6 +19,7 @@ from ..io.native import (
     write_table,
 )
 from ..io.outputset import MARKER, OutputSet
+from ..io.spill import trim_heap
 from ..report_data import REPORT_FILES
 from .result import JobResult
 from .summary import incomplete_reason
@@ -55,6 +56,7 @@ def write_outputs(result: JobResult, out_dir: str | Path | None = None) -> dict[
         # jumps there; insgnss.columns)
         epochs = [x.index for x in (result.inputs.gnss, result.inputs.control_points)
                   if x is not None]
+        df = table = None
         rate, preset = job["outputs"]["rate_hz"], job["process"]["preset"]
 
         def rows_of(t):
@@ -104,6 +106,8 @@ def write_outputs(result: JobResult, out_dir: str | Path | None = None) -> dict[
                 table = ev["outages"]
                 atomic_write(dest(f"outages_{name}.csv"),
                              lambda p, table=table: table.to_csv(p, index=False))
+        tables = df = table = None
+        trim_heap()  # the written tables' rows go back to the system before the report
         if job["outputs"]["report"]:  # report.html, report_interactive.html, fig_* files
             from ..report import write_report
 
