@@ -83,7 +83,7 @@ def position_errors(solution: pd.DataFrame, reference: pd.DataFrame, *,
     for a in range(0, tr.size, _BLOCK):
         b = min(a + _BLOCK, tr.size)
         enu[a:b] = _position_errors_block(ts, tr[a:b], sol, [r[a:b] for r in ref], max_gap)
-    out = pd.DataFrame(enu, index=reference.index, columns=["east", "north", "up"])
+    out = pd.DataFrame(enu, index=reference.index, columns=["east", "north", "up"], copy=False)
     out["horizontal"] = np.hypot(out["east"], out["north"])
     return out
 

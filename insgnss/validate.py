@@ -1006,10 +1006,30 @@ def ensure_not_input(path: str | os.PathLike, inputs: Iterable[str | os.PathLike
     return p
 
 
+class SourceRows(np.ndarray):
+    """The file line of each row of a table read from a file (``attrs["source_rows"]``):
+    a read-only int64 array that pandas' copies of the attrs share instead of copying (every
+    slice, selection or arithmetic result of a DataFrame deep-copies its attrs: for a long log
+    that was one array of 8 bytes per row per derived table). Indexing gives new arrays."""
+
+    def __deepcopy__(self, memo):
+        return self
+
+    def __copy__(self):
+        return self
+
+
+def source_row_numbers(line_no) -> SourceRows:
+    """``line_no`` as a shared, read-only :class:`SourceRows`."""
+    rows = np.array(line_no, np.int64).view(SourceRows)
+    rows.flags.writeable = False
+    return rows
+
+
 def finish_attrs(df: pd.DataFrame, *, file, fmt: str, time_base: str, line_no: np.ndarray,
                  time_column: str = "time", **extra) -> pd.DataFrame:
     """Set the attrs every reader provides: source, format, time base, line numbers, records."""
     df.attrs.update({"source": str(file), "format": fmt, "time_base": time_base,
-                     "time_column": time_column, "source_rows": np.asarray(line_no, np.int64)})
+                     "time_column": time_column, "source_rows": source_row_numbers(line_no)})
     df.attrs.update(extra)
     return df
