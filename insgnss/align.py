@@ -352,3 +352,117 @@ def coarse_align(
         stds = alignment_std(model, lat, T, g, heading_source)
     return AlignmentResult(roll, pitch, A, *stds, heading_source=heading_source,
                            time=float(imu.index[-1]), C=euler_to_dcm(roll, pitch, A))
+
+
+@dataclass(frozen=True)
+class MotionHeading:
+    """Result of :func:`heading_in_motion`: the heading offset [rad] to add to the free-inertial
+    run's heading, its 1-sigma [rad], the last epoch used, the GNSS displacement there [m] and
+    the number of epochs fitted."""
+
+    offset: float
+    std: float
+    end: float
+    distance: float
+    n: int
+
+
+def free_inertial_drift_std(t, rotation, model: ImuErrorModel, static_duration: float,
+                            g: float = 9.80665) -> np.ndarray:
+    """Horizontal position error (1-sigma per axis, m) of a free-inertial run started at rest
+    from a static levelling, at the times ``t`` [s since the start, increasing].
+
+    ``rotation`` is the body's rotation angle [rad] from its start attitude at ``t``. The terms,
+    each integrated twice from the specific-force error (Groves 2013 sec. 5.7 and 14.2):
+
+    - velocity random walk: ``vrw t^1.5 / sqrt(3)``;
+    - accelerometer bias: levelling absorbs it into the tilt while the body keeps its start
+      attitude; a rotation ``theta`` turns the body-axis bias against the level-frame tilt by
+      ``2 sin(theta / 2) sigma_ba`` (the same physics as a real turn); the in-run instability
+      adds ``sigma_bi t^2 / 2``;
+    - gyro: the bias left after removing the static mean (the mean's noise ``arw / sqrt(T)``
+      and the in-run instability) tilts the platform linearly, ``g b t^3 / 6``; the angle random
+      walk as ``g arw t^2.5 / sqrt(20)``.
+    """
+    t = np.asarray(t, float)
+    rot = np.asarray(rotation, float)
+    a_rot = model.accel_bias * 2.0 * np.abs(np.sin(0.5 * rot))
+    # double integral of a(s): p(t) = int_0^t (t - s) a(s) ds (fully correlated, conservative)
+    dt = np.diff(t, prepend=t[0])
+    v = np.cumsum(a_rot * dt)
+    p_rot = np.cumsum(v * dt)
+    b_g = np.hypot(model.gyro_arw / np.sqrt(max(static_duration, 1e-3)),
+                   model.gyro_bias_instability)
+    terms = (model.accel_vrw * t ** 1.5 / np.sqrt(3.0), p_rot,
+             0.5 * model.accel_bias_instability * t ** 2, g * b_g * t ** 3 / 6.0,
+             g * model.gyro_arw * t ** 2.5 / np.sqrt(20.0))
+    return np.sqrt(sum(x ** 2 for x in terms))
+
+
+def heading_in_motion(t, ins_disp, gnss_disp, drift_std, gnss_std: float,
+                      angle_std=None) -> MotionHeading | None:
+    """In-motion heading alignment: the rotation about the vertical that maps the horizontal
+    displacements of a free-inertial run (started with heading 0 from a static levelling) onto
+    the GNSS displacements over the same epochs.
+
+    A heading error ``psi`` at the start of a free-inertial run turns the whole computed path
+    about the start point by ``psi`` (the gyros measure the turns; the levelled accelerometers
+    the accelerations along the body axes), whatever the platform does: it needs no relation
+    between the device's axes and the direction of travel (a hand-held device, a side-slipping
+    or reversing vehicle). With the displacements as complex numbers ``z = north + i east``
+    (argument = azimuth), each epoch is an azimuth measurement ``arg(y_k conj(x_k))`` with
+    sigma ``s_k = hypot(drift_k, gnss_std) / |y_k|`` (plus ``angle_std``: e.g. the gyro scale
+    factor times the angle turned). The fit uses the epochs up to the one of smallest ``s_k``
+    (past it the inertial drift grows faster than the distance): the weighted circular mean
+    ``psi = arg(sum w_k y_k conj(x_k) / |y_k conj(x_k)|)``, ``w_k = 1 / s_k^2``, with the
+    sigma of fully correlated errors ``sum w_k s_k / sum w_k``, scaled up by the RMS of the
+    normalised residuals when that exceeds 1.
+
+    Parameters
+    ----------
+    t : array (n,)
+        Epochs [s], increasing.
+    ins_disp, gnss_disp : array (n, 2)
+        East, north displacement [m] from the start of the free-inertial run (heading 0) and of
+        the GNSS (the same antenna point).
+    drift_std : array (n,)
+        1-sigma per-axis position error of the free-inertial run (:func:`free_inertial_drift_std`).
+    gnss_std : float
+        1-sigma per-axis error of a GNSS displacement [m].
+    angle_std : array (n,), optional
+        Further azimuth error of each epoch [rad].
+
+    Returns
+    -------
+    MotionHeading or None
+        None when no epoch gives an azimuth sigma below 0.3 rad (too little motion).
+
+    References
+    ----------
+    Groves 2013, sec. 14.2.3 (heading from GNSS velocity and the IMU); the attitude
+    determination by vector matching of the optimisation-based alignment (Wu and Pan 2013,
+    IEEE TAES 49(4)) reduced to the one unknown angle left after levelling.
+    """
+    t = np.asarray(t, float)
+    x = np.asarray(ins_disp, float)
+    y = np.asarray(gnss_disp, float)
+    zx = x[:, 1] + 1j * x[:, 0]
+    zy = y[:, 1] + 1j * y[:, 0]
+    dist = np.abs(zy)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        s = np.hypot(np.asarray(drift_std, float), gnss_std) / dist
+        if angle_std is not None:
+            s = np.hypot(s, np.asarray(angle_std, float))
+    ok = np.isfinite(s) & (s < 0.3) & (np.abs(zx) > 0)
+    if not ok.any():
+        return None
+    k = int(np.flatnonzero(ok)[np.argmin(s[ok])])
+    use = ok & (np.arange(t.size) <= k)
+    w = 1.0 / s[use] ** 2
+    u = zy[use] * np.conj(zx[use])
+    u = u / np.abs(u)
+    psi = float(np.angle(np.sum(w * u)))
+    std = float(np.sum(w * s[use]) / np.sum(w))
+    r = np.angle(u * np.exp(-1j * psi)) / s[use]
+    std *= max(1.0, float(np.sqrt(np.mean(r ** 2))))
+    return MotionHeading(psi, std, float(t[k]), float(dist[k]), int(use.sum()))

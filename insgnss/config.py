@@ -592,6 +592,11 @@ SCHEMA: dict[str, Any] = {
                                         check=_number(0.0, 180.0, lo_open=True),
                                         when=_is("initialization.method", "static",
                                                  "gnss_velocity")),
+        "heading_alignment": _spec(str, "course", "static start without gyrocompassing: "
+                                   "heading from the GNSS course (course) or from matching a "
+                                   "free-inertial run to the GNSS displacements after the "
+                                   "static window (in_motion, falls back to the course)",
+                                   choices=["course", "in_motion"], when=STATIC),
         "start_time": _spec(_NUM, None, "start processing here [s, job time base]; inside the "
                             "IMU data"),
         "position_std": _spec(_NUM, None, "initial position sigma [m] (default: GNSS)",

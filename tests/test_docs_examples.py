@@ -55,11 +55,7 @@ def test_examples_are_found():
 
 #: examples whose generated-data run is a known defect (title prefix -> reason); the real
 #: recording the example describes is checked by tests/test_scenarios.py
-KNOWN = {"Hand-held walk": "consumer-IMU walk on generated data ends 18-110 m off: the 30 deg "
-                           "course-heading sigma lets the heading corrections split the levelled "
-                           "tilt from the accelerometer bias with a far too small sigma "
-                           "(docs/generalization.md, 'A wide heading sigma on a smooth walk'; the "
-                           "real walk_0827 recording is within bounds)"}
+KNOWN: dict[str, str] = {}
 
 
 def _params():

@@ -156,13 +156,17 @@ def still_threshold(static: pd.DataFrame, limit: float) -> float:
     return float(min(max(base, STILL_MARGIN * level), max(base, limit)))
 
 
-def stillness_times(job: Job, imu: pd.DataFrame, static: pd.DataFrame | None = None
+def stillness_times(job: Job, imu: pd.DataFrame, static: pd.DataFrame | None = None,
+                    moving: list[tuple[float, float]] | None = None
                     ) -> tuple[np.ndarray, float | None]:
     """Times (at the ZUPT interval) when the IMU is still, from the detector and/or declared
     static intervals, and the threshold of the default detector (None when the job sets the
     detector or only declares intervals). With the static window ``static`` of the
     initialization and ``aiding.zupt_threshold_from_static`` the default threshold follows
-    its still noise (:func:`still_threshold`)."""
+    its still noise (:func:`still_threshold`). ``moving``: intervals where the GNSS shows the
+    antenna moving; the detector's still times inside them are dropped (a smooth pull-away
+    changes neither the specific-force magnitude nor the rates the detector sees), declared
+    intervals are kept."""
     a = job["aiding"]
     t = imu.index.to_numpy(float)
     still = np.zeros(t.size, bool)
@@ -179,7 +183,10 @@ def stillness_times(job: Job, imu: pd.DataFrame, static: pd.DataFrame | None = N
                     static, job["initialization"]["static_max_accel_std"])
             thr = float(spec["threshold"])
             cfg = DetectorConfig(**spec)
-        still |= detect_stillness(imu, cfg).still.to_numpy(bool)
+        det = detect_stillness(imu, cfg).still.to_numpy(bool).copy()
+        for m0, m1 in moving or []:
+            det[(t >= m0) & (t <= m1)] = False
+        still |= det
     for a0, a1 in a["static_intervals"] or []:
         still |= (t >= a0) & (t <= a1)
     ts = t[still]
@@ -542,7 +549,11 @@ def build_aiding(job: Job, inputs: Inputs, windows, imu: pd.DataFrame,
         gs, src.gnss_used = _gnss_sources(job, inputs.gnss, inputs.lever_arm, windows, imu)
         src.sources += gs
     if a["zupt"] or a["zaru"]:
-        ts, src.still_threshold = stillness_times(job, imu, static)
+        from .initialization import gnss_moving_intervals
+
+        ts, src.still_threshold = stillness_times(job, imu, static,
+                                                  gnss_moving_intervals(inputs.gnss, windows,
+                                                                        displacement_sigmas=3.0))
         how = "the stillness detector ([aiding.detector])" if a["detector"] or \
             not a["static_intervals"] else "aiding.static_intervals"
         vmax = a["zupt_max_speed"]

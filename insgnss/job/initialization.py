@@ -41,9 +41,12 @@ import pandas as pd
 
 from ..align import (
     GYROCOMPASS_MAX_BIAS_RATIO,
+    MotionHeading,
     coarse_align,
+    free_inertial_drift_std,
     gyrocompass,
     gyrocompass_check,
+    heading_in_motion,
     level_moving,
     static_means,
 )
@@ -51,7 +54,7 @@ from ..attitude import euler_to_dcm
 from ..checks import check_gyro_at_rest, check_upright, static_window_error
 from ..config import Job
 from ..detect import find_static_windows
-from ..earth import enu_displacement_to_geodetic
+from ..earth import earth_rate_l, enu_displacement_to_geodetic, geodetic_to_enu
 from ..errors import AlignmentError, ConfigError
 from ..imu import ACCEL_COLS, DV_COLS, GYRO_COLS, ImuErrorModel
 from ..mechanization.strapdown import NavState, mechanize
@@ -70,6 +73,18 @@ MIN_STATIC = 1.0
 #: a GNSS antenna faster than this [m/s] is moving: the static window ends before that epoch
 #: (RTK speed noise is a few cm/s, a single-point fix's a few dm/s)
 STATIC_GNSS_SPEED = 0.3
+#: in-motion heading alignment (``initialization.heading_alignment = "in_motion"``): longest
+#: free-inertial run after the static window [s] (the fit stops earlier, where the modelled
+#: inertial drift outgrows the distance travelled), a GNSS gap longer than this [s] ends it
+#: (an outage: the run never uses an epoch it is meant not to see), the per-axis GNSS position
+#: sigma [m] when the table has none, the floor of the heading sigma it gives and the largest
+#: sigma it is used with [rad] (beyond a few degrees the small-angle heading error of the filter
+#: is what the alignment is meant to avoid: the GNSS course is used then)
+MOTION_WINDOW = 60.0
+MOTION_MAX_GAP = 2.0
+MOTION_GNSS_STD = 0.05
+MIN_MOTION_HEADING_STD = float(np.radians(0.5))
+MAX_MOTION_HEADING_STD = float(np.radians(5.0))
 
 
 @dataclass
@@ -330,6 +345,16 @@ def _initialize(job: Job, inputs: Inputs, model: ImuErrorModel, windows) -> Init
     else:
         tilt = (max(res.roll_std, np.radians(0.1)), max(res.pitch_std, np.radians(0.1)))
     att_std = (*tilt, np.radians(5.0))
+    motion = None
+    if src == "gnss_course" and ini["heading_alignment"] == "in_motion" \
+            and GYRO_COLS[0] in win.columns:
+        motion = _heading_in_motion(job, imu, gnss, res, w_mean, model, T,
+                                    float(win.index[0]))
+        if motion is not None and motion.std < min(MAX_MOTION_HEADING_STD,
+                                                   np.radians(ini["course_heading_std_deg"])):
+            src = "in_motion"
+            hdg = motion.offset
+            att_std = (att_std[0], att_std[1], max(motion.std, MIN_MOTION_HEADING_STD))
     if src == "gnss_course":
         hdg = _heading_from_course(imu, gnss, all_gnss, windows, res, ini["min_speed"],
                                    w_mean if GYRO_COLS[0] in win.columns else None,
@@ -380,18 +405,39 @@ def standing_intervals(gnss: pd.DataFrame | None, windows) -> list[tuple[float, 
     return out
 
 
-def _moving_intervals(gnss: pd.DataFrame | None, windows) -> list[tuple[float, float]]:
+def gnss_moving_intervals(gnss: pd.DataFrame | None, windows,
+                          displacement_sigmas: float | None = None
+                          ) -> list[tuple[float, float]]:
     """Intervals around the usable GNSS epochs faster than :data:`STATIC_GNSS_SPEED` (half an
-    epoch interval either side): the antenna moved, so the platform is not static there."""
-    if gnss is None or not len(gnss) or "vel_e" not in gnss.columns:
+    epoch interval either side): the antenna moved, so the platform is not static there.
+
+    With ``displacement_sigmas`` and the position sigmas in the table, the span between two
+    consecutive usable epochs (at most 1.5 median intervals apart) also counts as moving when
+    the horizontal displacement between them exceeds ``displacement_sigmas`` times its sigma
+    ``sqrt(s_1^2 + s_2^2)``, ``s = hypot(east_std, north_std)``: 2 cm RTK positions resolve
+    the first second of a smooth pull-away that the speed limit, sized for single-point
+    velocities, misses."""
+    if gnss is None or not len(gnss):
         return []
     g = outside_windows(gnss, windows)
     t = g.index.to_numpy(float)
-    sp = np.hypot(g["vel_e"].to_numpy(float), g["vel_n"].to_numpy(float))
     if t.size < 2:
         return []
-    half = 0.5 * float(np.median(np.diff(t)))
-    return [(float(x) - half, float(x) + half) for x in t[sp > STATIC_GNSS_SPEED]]
+    dt = float(np.median(np.diff(t)))
+    out: list[tuple[float, float]] = []
+    if "vel_e" in g.columns:
+        sp = np.hypot(g["vel_e"].to_numpy(float), g["vel_n"].to_numpy(float))
+        out += [(float(x) - 0.5 * dt, float(x) + 0.5 * dt) for x in t[sp > STATIC_GNSS_SPEED]]
+    if displacement_sigmas and {"east_std", "north_std"} <= set(g.columns):
+        e, n, _ = geodetic_to_enu(g["lat"].to_numpy(float), g["lon"].to_numpy(float),
+                                  g["height"].to_numpy(float), float(g["lat"].iloc[0]),
+                                  float(g["lon"].iloc[0]), float(g["height"].iloc[0]))
+        sd = np.hypot(g["east_std"].to_numpy(float), g["north_std"].to_numpy(float))
+        step = np.hypot(np.diff(np.asarray(e)), np.diff(np.asarray(n)))
+        lim = displacement_sigmas * np.hypot(sd[:-1], sd[1:])
+        k = np.flatnonzero((step > lim) & np.isfinite(lim) & (np.diff(t) <= 1.5 * dt))
+        out += [(float(t[i]), float(t[i + 1])) for i in k]
+    return sorted(out)
 
 
 def _static_window(job: Job, imu: pd.DataFrame, gnss, windows, t0: float):
@@ -402,7 +448,7 @@ def _static_window(job: Job, imu: pd.DataFrame, gnss, windows, t0: float):
                if g.get("action") == "bridged"]
     sw = find_static_windows(imu, max_accel_std=ini["static_max_accel_std"],
                              max_rate_std=np.radians(ini["static_max_rate_std_deg"]),
-                             exclude=bridged + _moving_intervals(gnss, windows))
+                             exclude=bridged + gnss_moving_intervals(gnss, windows))
     src = imu.attrs.get("source")
     floors = {"accel_floor": sw.accel_floor, "rate_floor_deg_s": float(np.degrees(sw.rate_floor))}
     if ini["static_duration"] is not None:
@@ -450,6 +496,74 @@ def _static_window(job: Job, imu: pd.DataFrame, gnss, windows, t0: float):
     return imu.loc[a0:a1], info, (a0, a1) if truly else None
 
 
+def _heading_in_motion(job: Job, imu, gnss, res, w_mean, model: ImuErrorModel,
+                       static_T: float, t_begin: float):
+    """In-motion heading alignment after the static window (:func:`insgnss.align.heading_in_motion`):
+    a free-inertial run from the levelled attitude with heading 0 over at most
+    :data:`MOTION_WINDOW` seconds, its antenna displacements matched to the GNSS displacements
+    from the mean usable GNSS position over the static window (the platform is still there),
+    up to the first gap longer than :data:`MOTION_MAX_GAP` between the epochs after it (an
+    outage). The static mean rate minus the Earth rate of the
+    heading-0 attitude is removed from the gyros (the heading-0 run then sees the Earth rate a
+    perfect IMU would see at heading 0). None without GNSS velocity-free positions to match or
+    with too little motion."""
+    if gnss is None or len(gnss) < 3:
+        return None
+    t_s = res.time
+    still = gnss.loc[t_begin: t_s]
+    g = gnss.loc[np.nextafter(t_s, np.inf): t_s + MOTION_WINDOW]
+    tg = g.index.to_numpy(float)
+    if not len(still) or tg.size < 3:
+        return None
+    gaps = np.flatnonzero(np.diff(tg) > MOTION_MAX_GAP)
+    if gaps.size:
+        g, tg = g.iloc[:gaps[0] + 1], tg[:gaps[0] + 1]
+    # the platform is still over the static window: its usable epochs give the start point
+    lat0, lon0, h0 = (float(still[c].mean()) for c in ("lat", "lon", "height"))
+    e, n, _ = geodetic_to_enu(g["lat"].to_numpy(float), g["lon"].to_numpy(float),
+                              g["height"].to_numpy(float), lat0, lon0, h0)
+    y = np.column_stack([np.asarray(e), np.asarray(n)])
+    seg = imu.loc[t_s: min(float(tg[-1]) + 0.1, float(imu.index[-1]))].copy()
+    if len(seg) < 3:
+        return None
+    C0 = euler_to_dcm(res.roll, res.pitch, 0.0)
+    seg[GYRO_COLS] = seg[GYRO_COLS].to_numpy() - (w_mean - C0.T @ earth_rate_l(lat0))
+
+    def run(roll, pitch, table=seg):
+        x0 = NavState.from_euler(lat0, lon0, h0, (0, 0, 0), roll, pitch, 0.0, time=t_s)
+        return mechanize(table, x0, fix_height=True)
+
+    roll, pitch = res.roll, res.pitch
+    m = run(roll, pitch)
+    tm = m.index.to_numpy(float)
+    tg = tg[tg <= tm[-1]]
+    if tg.size < 3:
+        return None
+    y = y[:tg.size]
+    ie, in_, _ = geodetic_to_enu(m["lat"].to_numpy(float), m["lon"].to_numpy(float),
+                                 m["height"].to_numpy(float), lat0, lon0, h0)
+    C = euler_to_dcm(m["roll"].to_numpy(float), m["pitch"].to_numpy(float),
+                     m["heading"].to_numpy(float))
+    lever = np.asarray(job["inputs"]["gnss"]["lever_arm"], float)
+    ant = np.column_stack([ie, in_]) + (C @ lever)[:, :2] - (C0 @ lever)[:2]
+    # body rotation from the start attitude: angle of C0^T C
+    rot = np.arccos(np.clip(0.5 * (np.einsum("ij,kij->k", C0, C) - 1.0), -1.0, 1.0))
+    drift = free_inertial_drift_std(tm - t_s, rot, model, static_T)
+    turned = np.abs(np.unwrap(m["heading"].to_numpy(float)) - float(m["heading"].iloc[0]))
+    k = np.clip(np.searchsorted(tm, tg), 0, tm.size - 1)
+    x = ant[k]
+    sg = MOTION_GNSS_STD
+    if "east_std" in g.columns and "north_std" in g.columns:
+        sg = float(np.nanmedian(np.hypot(g["east_std"], g["north_std"])) / np.sqrt(2.0))
+        sg = sg if np.isfinite(sg) and sg > 0 else MOTION_GNSS_STD
+    out = heading_in_motion(tg, x, y, drift[k], np.sqrt(2.0) * sg,
+                            angle_std=model.gyro_scale * turned[k])
+    if out is None:
+        return None
+    return MotionHeading(float(np.mod(out.offset, 2 * np.pi)), out.std, out.end, out.distance,
+                         out.n)
+
+
 def _heading_from_course(imu, gnss, all_gnss, windows, res, min_speed, w_mean,
                          why: str = "") -> float:
     """Heading at the end of the static window: the course over ground at the first usable
@@ -478,4 +592,4 @@ def _heading_from_course(imu, gnss, all_gnss, windows, res, min_speed, w_mean,
     return float(np.mod(course - m["heading"].iloc[-1], 2 * np.pi))
 
 
-__all__ = ["Initialization", "initialize"]
+__all__ = ["Initialization", "gnss_moving_intervals", "initialize"]
