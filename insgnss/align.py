@@ -22,6 +22,12 @@ tactical MEMS included (in-run stability of about 1 deg/h, but a turn-on bias of
 of deg/h; consumer parts 10-1000 deg/h). For those the heading comes from GNSS velocity once
 moving, a magnetometer, or is given; :func:`default_heading_source` picks per grade.
 
+In-motion heading alignment (:func:`heading_in_motion`): the free-inertial path after a static
+levelling, computed with heading 0, is the true path turned about its start by the heading;
+matching it to the GNSS displacements gives the IMU's own heading (no side-slip assumption),
+each epoch weighted by the modelled inertial drift over the distance travelled
+(:func:`free_inertial_drift_std`).
+
 Feasibility from the data (:func:`gyrocompass_check`): the preset's bias is a claim about the
 part, the parked window is evidence. Gyrocompassing is used only when both allow the heading
 sigma it would report:
