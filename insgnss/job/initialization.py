@@ -4,7 +4,11 @@
 - ``static``: levelling over the initial static window; heading by gyrocompassing
   when the IMU grade allows it, else the given ``heading_deg``, else from GNSS: the course over
   ground at the first GNSS epoch faster than ``min_speed`` minus the heading change the gyros
-  measured from the start to that epoch (a free-inertial run with the levelled attitude);
+  measured from the start to that epoch (a free-inertial run with the levelled attitude); with
+  ``heading_alignment = "in_motion"`` first the in-motion alignment
+  (:func:`insgnss.align.heading_in_motion`: the free-inertial path matched to the GNSS path
+  after the static window), used when its sigma is below :data:`MAX_MOTION_HEADING_STD` and
+  ``course_heading_std_deg``;
 - ``gnss_velocity``: start at the first GNSS epoch faster than ``min_speed`` with the GNSS
   position and velocity, heading = course over ground (no side slip), roll/pitch from the
   accelerometers averaged over 1 s with the vehicle's acceleration over that second (GNSS
