@@ -109,12 +109,16 @@ def _rebuild(res):
     return np.array(Pf), np.array(Pp), np.array(Phi), np.array(fb), np.array(rows)
 
 
-def test_high_rate_smoother_equals_rts_over_every_sample(car):
+@pytest.mark.parametrize("covariance", [True, False])
+def test_high_rate_smoother_equals_rts_over_every_sample(car, covariance):
     """The engine's backward pass through high-rate segments (adjoint backwards, smoothed
     errors rebuilt forwards without stored covariances) equals the RTS smoother run on every
-    IMU sample of them as a node."""
+    IMU sample of them as a node: with the stacked updates (smoothed covariances) and with the
+    row-by-row updates the compiled path applies without them (the stored K, S^-1 z are the
+    stacked update's)."""
     truth, imu, gnss, init, t, still = car
-    res = run_filter(imu, init, _meas(gnss, t, still, True), _config())
+    res = run_filter(imu, init, _meas(gnss, t, still, True),
+                     _config(smoother_covariance=covariance))
     Pf, Pp, Phi, fb, rows = _rebuild(res)
     # high-rate samples (an IMU row at a filter epoch shows the epoch's node instead)
     sel = (rows >= 0) & ~np.isin(t[np.maximum(rows, 0)], res.epoch_times)
@@ -211,3 +215,50 @@ def test_coupled_clock_nominal_follows_its_dynamics(car):
         assert f["clock_drift"].iloc[-1] == pytest.approx(2.5, abs=1e-12)
         assert f["clock_bias"].iloc[-1] == pytest.approx(1000.0 + 2.5 * span, rel=1e-9)
         assert f["clock_bias_std"].iloc[-1] > 0.1 * span  # the drift sigma integrates
+
+
+def test_sequential_rows_give_the_stacked_update():
+    """With uncorrelated rows (diagonal R) the row-by-row update of the compiled path gives the
+    stacked update's P(k|k), correction and the smoother's K and S^-1 z."""
+    from insgnss.filter.highrate import _kalman_update, _sequential_update
+    from insgnss.filter.linalg import _innovation_cov
+
+    rng = np.random.default_rng(5)
+    n, m = 15, 6
+    A = rng.standard_normal((n, n))
+    P0 = A @ A.T * 1e-3 + np.diag(rng.uniform(1e-4, 1e-2, n))
+    H = np.zeros((m, n))
+    for a in range(3):  # a ZUPT (unit rows) and a ZARU (gyro bias and small attitude terms)
+        H[a, 3 + a] = 1.0
+        H[3 + a, 9 + a] = -1.0
+        H[3 + a, 6:9] = 1e-3 * rng.standard_normal(3)
+    rd = np.array([1e-4, 2e-4, 3e-4, 1e-6, 2e-6, 3e-6])
+    z = rng.standard_normal(m) * 0.01
+    S = H @ P0 @ H.T + np.diag(rd)
+    K = P0 @ H.T @ np.linalg.inv(S)
+    P_ref = P0 - K @ S @ K.T
+
+    def scratch():
+        return (np.zeros(n), np.empty((m, n)), np.empty((m, n)), np.empty(m))
+
+    P = P0.copy()
+    x, Kt, _, s = scratch()
+    assert _sequential_update(P, H, z, rd, m, x, Kt, s, np.empty(n), np.empty(n),
+                              np.empty(n, np.int64), np.empty(n), n)
+    P2 = P0.copy()
+    x2, Kt2, G2, s2 = scratch()
+    HP, S2 = np.empty((m, n)), np.empty((m, m))
+    _innovation_cov(H, P2, np.diag(rd), m, HP, S2, n)
+    assert _kalman_update(P2, H, z, m, HP, S2, x2, Kt2, G2, s2, np.empty((m, m)),
+                          np.empty((m, n)), np.empty((m, n)), True, n)
+    np.testing.assert_allclose(P, P_ref, rtol=0, atol=1e-12 * np.abs(P0).max())
+    np.testing.assert_array_equal(P, P.T)
+    for got, stacked, ref in ((x, x2, K @ z), (Kt, Kt2, K.T), (s, s2, np.linalg.solve(S, z))):
+        tol = 1e-9 * np.abs(ref).max()
+        np.testing.assert_allclose(got, ref, rtol=0, atol=tol)
+        np.testing.assert_allclose(stacked, ref, rtol=0, atol=tol)
+    # a row whose innovation variance is not positive refuses the update
+    P = P0.copy()
+    P[3, 3] = -1.0
+    assert not _sequential_update(P, H, z, rd, m, x, Kt, s, np.empty(n), np.empty(n),
+                                  np.empty(n, np.int64), np.empty(n), n)

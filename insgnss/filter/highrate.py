@@ -20,6 +20,10 @@ node of the smoother's store (:mod:`.store`):
    is gated against the predicted ``P`` (:func:`.gating.gate_step`, the chi-square thresholds
    of the engine's gate table, gate recovery with :func:`.gating.inflate_for`), checked by the
    runaway-NIS monitor (:func:`.health.runaway_push`) and logged; the accepted ones are
+   applied one scalar row at a time when their noise is uncorrelated (diagonal ``R``: ZUPT,
+   ZARU, NHC; :func:`_sequential_update`, rank-one downdates at the non-zeros of ``H``, the
+   smoother's stacked ``K`` and ``S^-1 z`` recovered exactly from ``P(k|k)``; not in a run
+   that stores ``S^-1 H`` for smoothed covariances), else
    stacked into one update, ``P <- P - K S K^T`` as a symmetric rank-m downdate through the
    Cholesky factor of ``S`` (the optimal-gain form of the Joseph update at a third of its
    cost; :func:`_kalman_update`);
@@ -218,6 +222,107 @@ def _kalman_update(P, H, z, m, HP, S, x, Kt, G, s, L, W, V, want_G, n=-1):
 
 
 @njit(cache=True)
+def _innovation_cov_blocks(H, P, R, off, nm, HP, S, n):
+    """``HP = H P`` for the rows ``0 .. off[nm]-1`` and the diagonal blocks
+    ``S[o0:o1, o0:o1] = H P H^T + R`` of the measurements ``k < nm`` (rows ``off[k] ..
+    off[k+1]-1``): what gating and the innovation log read when the measurements are applied
+    one row at a time (:func:`_sequential_update`); the zeros of ``H`` are skipped."""
+    for a in range(off[nm]):
+        for j in range(n):
+            HP[a, j] = 0.0
+        for q in range(n):
+            h = H[a, q]
+            if h != 0.0:
+                for j in range(n):
+                    HP[a, j] += h * P[q, j]
+    for k in range(nm):
+        for a in range(off[k], off[k + 1]):
+            for b in range(off[k], a + 1):
+                v = R[a, b]
+                for q in range(n):
+                    h = H[b, q]
+                    if h != 0.0:
+                        v += HP[a, q] * h
+                S[a, b] = v
+                S[b, a] = v
+
+
+@njit(cache=True)
+def _sequential_update(P, H, z, rd, m, x, Kt, s, u, k, nzc, nzv, n):
+    """Kalman update with the first ``m`` rows of ``H``, ``z`` applied one scalar row at a
+    time, for mutually uncorrelated rows (``R = diag(rd)``, ``rd > 0``).
+
+    Row ``p`` (``h = H[p]``, prior ``x``, ``P``): ``u = P h^T``, ``s_p = h u + r_p``,
+    ``x += u (z_p - h x) / s_p``, ``P -= u u^T / s_p``. For uncorrelated rows this is the
+    stacked update (Maybeck 1979, sec. 7.4; Bierman 1977, ch. II) without the Cholesky factor
+    of the stacked ``S``: ``u`` is read at the non-zeros of ``h`` (a ZUPT row selects one
+    velocity state, a ZARU row a gyro bias and the attitude), the rank-one downdates touch the
+    upper triangle only and ``P`` is mirrored at the end.
+
+    The smoother's quantities of the stacked update follow from ``P(k|k)`` and ``x`` exactly
+    (``K = P(k|k) H^T R^-1``; the Woodbury form of ``S^-1`` gives ``S^-1 z = R^-1 (z - H x)``):
+    the transposed gain ``Kt`` and ``s = S^-1 z``, the arrays :func:`_kalman_update` gives, so
+    the store and the backward pass are those of the stacked update. (``S^-1 H = R^-1 (H - H K
+    H)`` would lose digits to cancellation when ``H P H^T >> R``: a run that stores it, for the
+    smoothed covariances, takes the stacked update.) ``u``, ``k``, ``nzv``: scratch (n,),
+    ``nzc``: int scratch (n,). Returns False (``P`` partly updated) if a row's ``s_p`` is not
+    positive.
+    """
+    for i in range(n):
+        x[i] = 0.0
+    for p in range(m):
+        nz = 0
+        for c in range(n):
+            if H[p, c] != 0.0:
+                nzc[nz] = c
+                nzv[nz] = H[p, c]
+                nz += 1
+        for j in range(n):
+            u[j] = 0.0
+        for q in range(nz):  # u = P h^T from the upper triangle
+            c = nzc[q]
+            hc = nzv[q]
+            for j in range(c):
+                u[j] += hc * P[j, c]
+            for j in range(c, n):
+                u[j] += hc * P[c, j]
+        sp = rd[p]
+        nu = z[p]
+        for q in range(nz):
+            sp += nzv[q] * u[nzc[q]]
+            nu -= nzv[q] * x[nzc[q]]
+        if not sp > 0.0:
+            return False
+        isp = 1.0 / sp
+        f = nu * isp
+        for i in range(n):
+            k[i] = u[i] * isp
+            x[i] += u[i] * f
+        for i in range(n):
+            ki = k[i]
+            for j in range(i, n):
+                P[i, j] -= ki * u[j]
+    for i in range(n):
+        for j in range(i + 1, n):
+            P[j, i] = P[i, j]
+    for p in range(m):  # K^T = R^-1 H P(k|k), S^-1 z = R^-1 (z - H x)
+        ri = 1.0 / rd[p]
+        for j in range(n):
+            Kt[p, j] = 0.0
+        hx = 0.0
+        for c in range(n):
+            hc = H[p, c]
+            if hc != 0.0:
+                hx += hc * x[c]
+                for j in range(n):
+                    Kt[p, j] += hc * P[c, j]
+        for j in range(n):
+            Kt[p, j] *= ri
+        s[p] = (z[p] - hx) * ri
+    return True
+
+
+@njit(cache=True)
 def _store_std_row(table, j, P, C, J, es, n):
     """Forward-table std columns (``STD_COLS``), parameter values are written by the caller,
     and parameter stds of row ``j`` from ``P`` (see :func:`.kernels.assemble_output`)."""
@@ -289,6 +394,11 @@ def dense_segment(model, dynamics, t, dth, dv, pos, vel, C, pnom, i_sg, i_sa, gm
     L = np.empty((mmax, mmax))
     W = np.empty((mmax, n))
     V = np.empty((mmax, n))
+    rd = np.empty(mmax)
+    u_s = np.empty(n)
+    k_s = np.empty(n)
+    nz_c = np.empty(n, np.int64)
+    nz_v = np.empty(n)
     Ln = np.empty((3, 3))
     wn = np.empty(3)
     fb_work = np.empty((3, 3, 3))
@@ -393,8 +503,25 @@ def dense_segment(model, dynamics, t, dth, dv, pos, vel, C, pnom, i_sg, i_sa, gm
             nm += 1
             m_tot += d
             off[nm] = m_tot
+        # uncorrelated rows (diagonal R, positive): applied one row at a time; gating and the
+        # log need only the diagonal blocks of S (not when the store keeps S^-1 H)
+        seq = not store_G
+        for p in range(m_tot):
+            rd[p] = Rk[p, p]
+            if not rd[p] > 0.0:
+                seq = False
+        for k in range(nm):
+            for p in range(off[k], off[k + 1]):
+                for q in range(off[k], off[k + 1]):
+                    if q != p and Rk[p, q] != 0.0:
+                        seq = False
         if nm:
-            if n == 15:
+            if seq:
+                if n == 15:
+                    _innovation_cov_blocks(Hk, P, Rk, off, nm, HP, S, 15)
+                else:
+                    _innovation_cov_blocks(Hk, P, Rk, off, nm, HP, S, n)
+            elif n == 15:
                 _innovation_cov(Hk, P, Rk, m_tot, HP, S, 15)
             else:
                 _innovation_cov(Hk, P, Rk, m_tot, HP, S, n)
@@ -419,7 +546,10 @@ def dense_segment(model, dynamics, t, dth, dv, pos, vel, C, pnom, i_sg, i_sa, gm
             if gc == gating.RECOVER:
                 health.runaway_restart(rw_state)
                 gating.inflate_for(P, Hk[o0:o1], Rk[o0:o1, o0:o1], zd, thr, n_nav)
-                _innovation_cov(Hk, P, Rk, m_tot, HP, S, n)  # the others see the inflated P
+                if seq:  # the others see the inflated P
+                    _innovation_cov_blocks(Hk, P, Rk, off, nm, HP, S, n)
+                else:
+                    _innovation_cov(Hk, P, Rk, m_tot, HP, S, n)
                 nis = gating.nis_into(S[o0:o1, o0:o1], zd, Ln, wn)
                 recovered = True
             acc[k] = gc != gating.REJECT
@@ -445,9 +575,13 @@ def dense_segment(model, dynamics, t, dth, dv, pos, vel, C, pnom, i_sg, i_sa, gm
                     continue
                 for p in range(off[k], off[k + 1]):
                     zk[dst] = zk[p]
+                    rd[dst] = rd[p]
                     for c in range(n):
                         Hk[dst, c] = Hk[p, c]
                         HP[dst, c] = HP[p, c]
+                    if seq:
+                        dst += 1
+                        continue
                     dc = 0
                     for k2 in range(nm):
                         if acc[k2]:
@@ -463,7 +597,13 @@ def dense_segment(model, dynamics, t, dth, dv, pos, vel, C, pnom, i_sg, i_sa, gm
         # --- 3. stacked update and feedback
         hr_r0[h] = r
         if m_acc > 0:
-            if n == 15:  # the constant dimension lets LLVM unroll the inlined loops
+            if seq and n == 15:  # the constant dimension lets LLVM unroll the loops
+                ok = _sequential_update(P, Hk, zk, rd, m_acc, x, Kt, sv, u_s, k_s, nz_c, nz_v,
+                                        15)
+            elif seq:
+                ok = _sequential_update(P, Hk, zk, rd, m_acc, x, Kt, sv, u_s, k_s, nz_c, nz_v,
+                                        n)
+            elif n == 15:
                 ok = _kalman_update(P, Hk, zk, m_acc, HP, S, x, Kt, G, sv, L, W, V, store_G, 15)
             else:
                 ok = _kalman_update(P, Hk, zk, m_acc, HP, S, x, Kt, G, sv, L, W, V, store_G, n)

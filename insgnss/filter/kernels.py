@@ -445,7 +445,7 @@ def _euler_std(C, Pa, J, out):
 
 @njit(cache=True)
 def assemble_output(t, nav_in, out_seg, out_post, ep_t, P_start, P_end, X_start, X_end, pnom_ep,
-                    n_rows, correct, out, X_hr, hr_node):
+                    n_rows, correct, out, X_hr, hr_node, stds=True):
     """IMU-rate output rows: nominal (optionally corrected) navigation state, stds, parameters.
 
     ``nav_in[j, 0:9]`` is the stored forward nominal (NAV_COLS). Sample ``j`` belongs to
@@ -466,7 +466,8 @@ def assemble_output(t, nav_in, out_seg, out_post, ep_t, P_start, P_end, X_start,
 
     ``out`` columns: lat lon height vel_e vel_n vel_u roll pitch heading, 9 stds (east north
     up, vel, roll pitch heading), then for each parameter state its value and its std.
-    The corrected attitude is ``exp(-[phi x]) C``.
+    The corrected attitude is ``exp(-[phi x]) C``. ``stds=False`` (a smoothed run without
+    smoothed covariances): the std columns are NaN and ``P_start``, ``P_end`` are not read.
     """
     n = P_start.shape[1]
     npar = n - 9
@@ -490,7 +491,9 @@ def assemble_output(t, nav_in, out_seg, out_post, ep_t, P_start, P_end, X_start,
             for a in range(n):
                 x[a] = X_hr[i_hr, a]
             e = hr_node[i_hr]
-            if e >= n_nodes:  # after the last node (a stopped run): its covariance
+            if not stds:
+                pass
+            elif e >= n_nodes:  # after the last node (a stopped run): its covariance
                 e = n_nodes - 1
                 for a in range(n):
                     pdiag[a] = P_start[e, a, a]
@@ -510,20 +513,25 @@ def assemble_output(t, nav_in, out_seg, out_post, ep_t, P_start, P_end, X_start,
             for a in range(n):
                 if correct:
                     x[a] = X_start[e, a]
-                pdiag[a] = P_start[e, a, a]
-            for a in range(3):
-                for b in range(3):
-                    Pa[a, b] = P_start[e, 6 + a, 6 + b]
+                if stds:
+                    pdiag[a] = P_start[e, a, a]
+            if stds:
+                for a in range(3):
+                    for b in range(3):
+                        Pa[a, b] = P_start[e, 6 + a, 6 + b]
             ep = e
         else:
             w = (t[j] - ep_t[e - 1]) / (ep_t[e] - ep_t[e - 1])
             for a in range(n):
                 if correct:
                     x[a] = (1.0 - w) * X_start[e - 1, a] + w * X_end[e, a]
-                pdiag[a] = (1.0 - w) * P_start[e - 1, a, a] + w * P_end[e, a, a]
-            for a in range(3):
-                for b in range(3):
-                    Pa[a, b] = (1.0 - w) * P_start[e - 1, 6 + a, 6 + b] + w * P_end[e, 6 + a, 6 + b]
+                if stds:
+                    pdiag[a] = (1.0 - w) * P_start[e - 1, a, a] + w * P_end[e, a, a]
+            if stds:
+                for a in range(3):
+                    for b in range(3):
+                        Pa[a, b] = ((1.0 - w) * P_start[e - 1, 6 + a, 6 + b]
+                                    + w * P_end[e, 6 + a, 6 + b])
             ep = e - 1
         _euler_dcm(nav_in[j, 6], nav_in[j, 7], nav_in[j, 8], C)
         if correct:
@@ -544,14 +552,22 @@ def assemble_output(t, nav_in, out_seg, out_post, ep_t, P_start, P_end, X_start,
             out[j, 7] = np.arctan2(Cc[2, 1], np.sqrt(Cc[0, 1] ** 2 + Cc[1, 1] ** 2))
             hd = np.arctan2(Cc[0, 1], Cc[1, 1])
             out[j, 8] = hd + 2.0 * np.pi if hd < 0.0 else hd
-            _euler_std(Cc, Pa, J, es)
-        else:
+            if stds:
+                _euler_std(Cc, Pa, J, es)
+        elif stds:
             _euler_std(C, Pa, J, es)
+        for i in range(npar):
+            p_nom = nav_in[j, 18 + i] if hr else pnom_ep[ep, i]
+            out[j, 18 + i] = p_nom - x[9 + i]
+        if not stds:
+            for i in range(9):
+                out[j, 9 + i] = np.nan
+            for i in range(npar):
+                out[j, 18 + npar + i] = np.nan
+            continue
         for i in range(6):
             out[j, 9 + i] = np.sqrt(max(pdiag[i], 0.0))
         for i in range(3):
             out[j, 15 + i] = es[i]
         for i in range(npar):
-            p_nom = nav_in[j, 18 + i] if hr else pnom_ep[ep, i]
-            out[j, 18 + i] = p_nom - x[9 + i]
             out[j, 18 + npar + i] = np.sqrt(max(pdiag[9 + i], 0.0))

@@ -302,20 +302,19 @@ class StrapdownModel(ProcessModelBase):
             X = xs_hr = np.zeros((1, self.layout.n))  # unused: no correction
             P0 = P1 = None
             Xp = Xm = X
+            stds = True
         else:
             out = self._allocate((n_rows, len(cols)), float)
             Xp, Xm, Ps, xs_hr = smoothed
             P0 = P1 = store.Pf if Ps is None else Ps
+            stds = Ps is not None  # without smoothed covariances the std columns are NaN
         if smoothed is None:
             P0, P1 = store.Pf, store.Pp
         # in row blocks: a block's pages of mapped tables are given back after it (spill.py)
         for i, j in spill.blocks(n_rows, self.table[:1].nbytes):
             kernels.assemble_output(t[i:j], self.table[i:j], self.seg[i:j], self.post[i:j],
                                     store.t[:n_nodes], P0, P1, Xp, Xm, store.par, j - i,
-                                    smoothed is not None, out[i:j], xs_hr, hr_node)
-            if smoothed is not None and Ps is None:
-                out[i:j, 9:18] = np.nan
-                out[i:j, 18 + self.n_par:] = np.nan
+                                    smoothed is not None, out[i:j], xs_hr, hr_node, stds)
             spill.release(self.table, i, j)
             spill.release(out, i, j)
         return Table(t[:n_rows], out[:n_rows], cols)
