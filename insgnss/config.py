@@ -673,7 +673,8 @@ SCHEMA: dict[str, Any] = {
                               "(suspension, vibration, slip) are correlated in time, so faster "
                               "updates over-weight it", check=POSITIVE, when=_on("aiding.nhc"),
                               min_imu_intervals=1),
-        "nhc_misalignment": _spec(bool, False, "estimate IMU-to-vehicle pitch/yaw misalignment",
+        "nhc_misalignment": _spec(bool, False, "estimate the residual IMU-to-vehicle pitch/yaw "
+                                  "misalignment in the NHC (strapdown process model)",
                                   when=_on("aiding.nhc")),
         "nhc_pitch_compliance": _spec(bool, False, "estimate the suspension's pitch per unit "
                                       "forward acceleration (squat/dive) in the vertical NHC "

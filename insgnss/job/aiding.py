@@ -575,14 +575,15 @@ def build_aiding(job: Job, inputs: Inputs, windows, imu: pd.DataFrame,
                       "aiding.detector" if how.startswith("the") else "aiding.static_intervals")],
                 m, _source_file(imu), 0, required=False))
     if a["nhc"]:
+        strapdown = job["filter"]["process_model"] == "strapdown"
         tn = t[0] + np.arange(1, int((t[-1] - t[0]) / a["nhc_interval"])) * a["nhc_interval"]
         m = BodyVelocity(tn, 0.0, axes=(0, 2), std=a["nhc_std"], name="nhc",
                          lever_arm=a["nhc_lever_arm"], slip_gradient=a["nhc_slip_gradient"],
+                         # strapdown error states (RISS takes no extra states: not used there)
                          misalignment_state="nhc_misalignment" if a["nhc_misalignment"]
-                         else None, pitch_compliance_state="nhc_pitch_compliance"
-                         # a strapdown error state (RISS takes no extra states: not used there)
-                         if a["nhc_pitch_compliance"]
-                         and job["filter"]["process_model"] == "strapdown" else None)
+                         and strapdown else None,
+                         pitch_compliance_state="nhc_pitch_compliance"
+                         if a["nhc_pitch_compliance"] and strapdown else None)
         src.sources.append(Source(
             "aiding.nhc", "nhc", "non-holonomic constraints",
             [Step(int(tn.size), "constraint epochs",
