@@ -775,7 +775,8 @@ SCHEMA: dict[str, Any] = {
         "autotune_sweeps": _spec(int, 2, "coordinate sweeps of the self-tuning",
                                  check=_integer(1), when=_on("filter.autotune")),
         "autotune_parameters": _spec(list, None, "parameters the self-tuning estimates "
-                                     "(default: every one the job's aiding can inform; "
+                                     "(default: every one the job's aiding can inform except "
+                                     "nhc_std, which is estimated only when named; "
                                      "docs/filter.md)", choices=list(AUTOTUNE_PARAMETERS),
                                      when=_on("filter.autotune")),
         "riss": {

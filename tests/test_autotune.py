@@ -232,3 +232,26 @@ def test_autotune_recovers_known_noise_and_coverage():
     assert cov_tuned >= cov_fixed and cov_tuned >= 0.97
     assert abs(nees_tuned - 2.0) < abs(nees_fixed - 2.0) and nees_tuned < 3.0
     assert tuned.summary["autotune"]["tuning_windows"]  # the coast view took part
+
+
+def test_nhc_sigma_is_tuned_only_when_named():
+    """The car profile's NHC sigma is not in the default parameter set (its time-correlated
+    violations bias the one-step likelihood low); a job that names it gets it, with the prior
+    from the job."""
+    from types import SimpleNamespace
+
+    from insgnss.imu import grade
+    from insgnss.job.tuning import EXPLICIT_ONLY, parameters
+
+    def names(filt):
+        job = load_job_dict({"job": {"platform": "car"},
+                             "filter": {"autotune": True, **filt}})
+        ctx = SimpleNamespace(job=job, inputs=SimpleNamespace(gnss=None), windows=[])
+        return {p.name: p for p in parameters(ctx, grade("consumer"))}
+
+    default = names({})
+    assert EXPLICIT_ONLY == ("nhc_std",)
+    assert "nhc_std" not in default and {"gyro_arw", "accel_vrw", "zupt_std"} <= set(default)
+    named = names({"autotune_parameters": ["nhc_std", "gyro_arw"]})
+    assert set(named) == {"nhc_std", "gyro_arw"}
+    assert named["nhc_std"].prior == pytest.approx(0.1)
