@@ -36,6 +36,8 @@ from insgnss.imu import grade  # noqa: E402
 
 KAPPA = np.radians(3.0) / 9.80665
 GRID = (0.025, 0.05, 0.1, 0.2, 0.4)
+#: white sigmas of the filter with violation states
+GRID_V = (0.01, 0.02, 0.05, 0.1)
 
 
 def slipping_car(rng, slip: float, tau: float, duration: float = 300.0, rate: float = 50.0):
@@ -69,9 +71,9 @@ def slipping_car(rng, slip: float, tau: float, duration: float = 300.0, rate: fl
     return out
 
 
-def row(x, f: str) -> str:
-    """``sigma:value`` pairs over :data:`GRID`."""
-    return " ".join(f"{g}:{v:{f}}" for g, v in zip(GRID, x, strict=True))
+def row(grid, x, f: str) -> str:
+    """``sigma:value`` pairs over ``grid``."""
+    return " ".join(f"{g}:{v:{f}}" for g, v in zip(grid, x, strict=True))
 
 
 def main() -> None:
@@ -80,9 +82,14 @@ def main() -> None:
     ap.add_argument("--first-seed", type=int, default=300)
     ap.add_argument("--slip", type=float, default=0.1)
     ap.add_argument("--tau", type=float, default=2.0)
+    ap.add_argument("--violation-tau", type=float, default=None,
+                    help="filter with Gauss-Markov violation states of this correlation time "
+                         "(the grid is then their white part)")
+    ap.add_argument("--violation-std", type=float, default=0.1)
     args = ap.parse_args()
     t0 = time.perf_counter()
-    ll = np.zeros((args.seeds, len(GRID)))
+    grid = GRID if args.violation_tau is None else GRID_V
+    ll = np.zeros((args.seeds, len(grid)))
     end = np.zeros_like(ll)
     srms = np.zeros_like(ll)
     for i in range(args.seeds):
@@ -103,9 +110,13 @@ def main() -> None:
         cfg = FilterConfig(imu_model=model.scaled(gyro_arw=20 * model.gyro_arw),
                            smoother=True, initial_att_std=(0.005, 0.005, 0.01))
         weights = None
-        for j, s in enumerate(GRID):
+        for j, s in enumerate(grid):
+            extra = {} if args.violation_tau is None else {
+                "violation_state": "slip", "violation_std": [args.violation_std] * 2,
+                "violation_tau": args.violation_tau}
             nhc = BodyVelocity(tn, 0.0, axes=(0, 2), std=[s, s], name="nhc",
-                               pitch_compliance_state="kappa", misalignment_state="mis")
+                               pitch_compliance_state="kappa", misalignment_state="mis",
+                               **extra)
             res = run_filter(imu, init, [GnssPosition(gnss[keep]), GnssVelocity(gnss[keep]),
                                          nhc], cfg)
             terms = innovation_terms(res.innovations)
@@ -120,12 +131,12 @@ def main() -> None:
             srms[i, j] = np.mean([np.sqrt(np.mean(es["east"].to_numpy()[m] ** 2
                                                   + es["north"].to_numpy()[m] ** 2))
                                   for m in ((ts >= a) & (ts < b) for a, b in outages)])
-        print(f"seed {args.first_seed + i}: one-step ML sigma {GRID[int(np.argmax(ll[i]))]}, "
-              f"least drift at {GRID[int(np.argmin(end[i]))]}", flush=True)
-        print(f"   end [m] {row(end[i], '.2f')}\n   smoothed in-outage RMS [m] "
-              f"{row(srms[i], '.3f')}\n   dLL {row(ll[i] - ll[i].max(), '.0f')}", flush=True)
-    print(f"mean end-of-outage [m]: {row(end.mean(axis=0), '.3f')}")
-    print(f"mean smoothed in-outage RMS [m]: {row(srms.mean(axis=0), '.3f')}")
+        print(f"seed {args.first_seed + i}: one-step ML sigma {grid[int(np.argmax(ll[i]))]}, "
+              f"least drift at {grid[int(np.argmin(end[i]))]}", flush=True)
+        print(f"   end [m] {row(grid, end[i], '.2f')}\n   smoothed in-outage RMS [m] "
+              f"{row(grid, srms[i], '.3f')}\n   dLL {row(grid, ll[i] - ll[i].max(), '.0f')}", flush=True)
+    print(f"mean end-of-outage [m]: {row(grid, end.mean(axis=0), '.3f')}")
+    print(f"mean smoothed in-outage RMS [m]: {row(grid, srms.mean(axis=0), '.3f')}")
     print(f"true slip sigma {args.slip} m/s (lateral), tau {args.tau} s; "
           f"{time.perf_counter() - t0:.0f} s")
 

@@ -673,6 +673,16 @@ SCHEMA: dict[str, Any] = {
                               "(suspension, vibration, slip) are correlated in time, so faster "
                               "updates over-weight it", check=POSITIVE, when=_on("aiding.nhc"),
                               min_imu_intervals=1),
+        "nhc_correlation_time": _spec(_NUM, 0.0, "correlation time of the NHC's violations "
+                                      "(side slip, suspension heave) [s]: > 0 models them as a "
+                                      "Gauss-Markov state per axis with sigma aiding.nhc_std, "
+                                      "and aiding.nhc_white_std is the white part (strapdown "
+                                      "process model; 0: white, sigma aiding.nhc_std)",
+                                      check=NONNEGATIVE, when=_on("aiding.nhc")),
+        "nhc_white_std": _spec(list, [0.02, 0.02], "white part of the NHC's lateral, vertical "
+                               "violation (vibration at the IMU) [m/s], with "
+                               "aiding.nhc_correlation_time > 0", check=_vector(2, POSITIVE),
+                               when=_on("aiding.nhc")),
         "nhc_misalignment": _spec(bool, False, "estimate the residual IMU-to-vehicle pitch/yaw "
                                   "misalignment in the NHC (strapdown process model)",
                                   when=_on("aiding.nhc")),

@@ -699,6 +699,15 @@ class BodyVelocity(Measurement):
         Initial sigma of ``kappa`` [rad / (m/s^2)].
     high_rate : bool
         Apply it on the engine's compiled high-rate path (at the IMU sample nearest each time).
+    violation_state : str, optional
+        Name of a block of first-order Gauss-Markov states ``s`` (one per constrained axis)
+        added to the predicted components, ``h_k += s_k``: the time-correlated part of the
+        constraint's violation (side slip, suspension heave) as a shaping filter (Bryson and
+        Henrikson 1968), so that ``std`` is only its white part. Python update path only.
+    violation_std : scalar or sequence per axis
+        Stationary sigma of ``s`` [m/s].
+    violation_tau : float
+        Correlation time of ``s`` [s].
     """
 
     name = "body_velocity"
@@ -710,7 +719,9 @@ class BodyVelocity(Measurement):
                  pitch_compliance_state: str | None = None,
                  pitch_compliance_std: float = PITCH_COMPLIANCE_STD,
                  gate_probability: float | None = None, name: str | None = None,
-                 high_rate: bool = False, slip_gradient: float = 0.0):
+                 high_rate: bool = False, slip_gradient: float = 0.0,
+                 violation_state: str | None = None, violation_std=0.1,
+                 violation_tau: float = 1.0):
         super().__init__(times, gate_probability, name)
         self.high_rate = bool(high_rate)
         self.slip_gradient = float(slip_gradient)
@@ -727,6 +738,18 @@ class BodyVelocity(Measurement):
                              "update path (high_rate=False)")
         self.pitch_compliance_state = pitch_compliance_state
         self.pitch_compliance_std = float(pitch_compliance_std)
+        if violation_state and high_rate:
+            raise ValueError("violation states need the Python update path (high_rate=False)")
+        self.violation_state = violation_state
+        self.violation_std = np.broadcast_to(np.asarray(violation_std, float),
+                                             (k,)).copy()
+        self.violation_tau = float(violation_tau)
+        if violation_state and not (np.all(np.isfinite(self.violation_std))
+                                    and np.all(self.violation_std > 0)
+                                    and np.isfinite(self.violation_tau)
+                                    and self.violation_tau > 0):
+            raise InvalidValueError("BodyVelocity: violation_std and violation_tau must be "
+                                    "finite and > 0", found=(violation_std, violation_tau))
         v = np.asarray(values, float)
         if v.ndim == 1 and v.size == n:  # one value per epoch
             v = v[:, None]
@@ -755,6 +778,12 @@ class BodyVelocity(Measurement):
         if self.pitch_compliance_state:
             out.append(ExtraState(self.pitch_compliance_state, 1, self.pitch_compliance_std,
                                   np.inf, 0.0))
+        if self.violation_state:
+            sd = tuple(float(x) for x in self.violation_std)
+            out.append(ExtraState(self.violation_state, self.axes.size, sd, self.violation_tau,
+                                  tuple(2.0 * x * x / self.violation_tau for x in sd),
+                                  labels=tuple(f"{self.violation_state}_{'xyz'[a]}"
+                                               for a in self.axes)))
         return out
 
     def compiled(self, layout):
@@ -776,9 +805,16 @@ class BodyVelocity(Measurement):
 
     def evaluate(self, i, nav):
         out = _run_compiled(self.compiled(nav.layout), i, nav, nav.omega_ib, 0.0)
-        if out is None or not self.pitch_compliance_state:
+        if out is None or not (self.pitch_compliance_state or self.violation_state):
             return out
         z, H, R = out
+        if self.violation_state:  # the violation adds to the constrained components
+            iv = nav.layout.index(self.violation_state)
+            k = self.axes.size
+            z += nav.params[iv - 9:iv - 9 + k]
+            H[:, iv:iv + k] += np.eye(k)
+        if not self.pitch_compliance_state:
+            return z, H, R
         ik = nav.layout.index(self.pitch_compliance_state)
         kappa = nav.params[ik - 9]
         c1, g = nav.C[:, 1], normal_gravity(nav.lat, nav.height)

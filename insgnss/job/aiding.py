@@ -577,7 +577,12 @@ def build_aiding(job: Job, inputs: Inputs, windows, imu: pd.DataFrame,
     if a["nhc"]:
         strapdown = job["filter"]["process_model"] == "strapdown"
         tn = t[0] + np.arange(1, int((t[-1] - t[0]) / a["nhc_interval"])) * a["nhc_interval"]
-        m = BodyVelocity(tn, 0.0, axes=(0, 2), std=a["nhc_std"], name="nhc",
+        # time-correlated violations as Gauss-Markov states of sigma nhc_std (strapdown)
+        tau = float(a["nhc_correlation_time"]) if strapdown else 0.0
+        viol = {"violation_state": "nhc_violation", "violation_std": a["nhc_std"],
+                "violation_tau": tau} if tau > 0 else {}
+        m = BodyVelocity(tn, 0.0, axes=(0, 2), std=a["nhc_white_std"] if tau > 0 else
+                         a["nhc_std"], name="nhc", **viol,
                          lever_arm=a["nhc_lever_arm"], slip_gradient=a["nhc_slip_gradient"],
                          # strapdown error states (RISS takes no extra states: not used there)
                          misalignment_state="nhc_misalignment" if a["nhc_misalignment"]
