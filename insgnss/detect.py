@@ -322,17 +322,80 @@ def _quantile_sorted(buf, m, q):
 
 
 @njit(cache=True)
-def _quantile_select(buf, m, q):
-    """:func:`_quantile_sorted` of the first ``m`` (unsorted) entries of ``buf`` by selection
-    (the two order statistics it needs, in O(m) instead of a sort)."""
+def _top2_of_smallest(x, lo, hi, k, sign, cap, hp):
+    """The largest and the second largest of the ``k`` (>= 2) smallest values of ``sign * x``
+    over the finite entries of ``x[lo:hi]`` that are ``<= cap`` (at least ``k``; then they hold
+    the ``k`` smallest of all): a max-heap of ``k`` entries in the scratch ``hp`` over one pass,
+    ``O(m log k)``, with few sift-downs when ``k << m`` and ``cap`` is near the ``k``-th value."""
+    a = lo
+    nh = 0
+    while nh < k:  # heapify the first k finite values (sift up)
+        v = sign * x[a]
+        a += 1
+        if not (np.isfinite(v) and v <= cap):
+            continue
+        c = nh
+        while c > 0:
+            par = (c - 1) // 2
+            if hp[par] >= v:
+                break
+            hp[c] = hp[par]
+            c = par
+        hp[c] = v
+        nh += 1
+    for b in range(a, hi):
+        v = sign * x[b]
+        if not v < hp[0] or v == -np.inf:  # NaN and +-inf are not finite values
+            continue
+        c = 0  # replace the root, sift down
+        while True:
+            ch = 2 * c + 1
+            if ch >= k:
+                break
+            if ch + 1 < k and hp[ch + 1] > hp[ch]:
+                ch += 1
+            if hp[ch] <= v:
+                break
+            hp[c] = hp[ch]
+            c = ch
+        hp[c] = v
+    second = hp[1]
+    if k > 2 and hp[2] > second:
+        second = hp[2]
+    return hp[0], second
+
+
+@njit(cache=True)
+def _quantile_select(x, lo, hi, m, q, hp, guess=np.inf):
+    """:func:`_quantile_sorted` of the ``m`` finite entries of ``x[lo:hi]`` by selection: the
+    two order statistics ``i``, ``i + 1`` it needs (``i = floor(q (m - 1))``) from a heap of the
+    ``i + 2`` smallest (or the ``m - i`` largest) values, in one pass without a copy or a sort;
+    ``hp``: scratch of ``m`` entries. ``guess``: a value expected just above the quantile (the
+    previous window's order statistic ``i + 1``): when at least ``i + 2`` values are ``<=
+    guess`` only those enter the heap (the result does not depend on it). Returns the quantile
+    and the order statistic ``i + 1`` (inf where there is none)."""
     pos = q * (m - 1)
     i = int(np.floor(pos))
     if i >= m - 1:
-        return np.max(buf[:m])
-    part = np.partition(buf[:m], i)
-    lo = part[i]
-    hi = np.min(part[i + 1:])
-    return lo + (pos - i) * (hi - lo)
+        v = -np.inf
+        for b in range(lo, hi):
+            if np.isfinite(x[b]) and x[b] > v:
+                v = x[b]
+        return v, np.inf
+    if i + 2 <= m - i:  # order statistics i + 1, i: the top two of the i + 2 smallest
+        cap = np.inf
+        if guess < np.inf:
+            c = 0
+            for b in range(lo, hi):
+                if x[b] <= guess and x[b] > -np.inf:  # finite (guess is)
+                    c += 1
+            if c >= i + 2:
+                cap = guess
+        vhi, vlo = _top2_of_smallest(x, lo, hi, i + 2, 1.0, cap, hp)
+    else:  # order statistics i, i + 1: the bottom two of the m - i largest
+        vlo, vhi = _top2_of_smallest(x, lo, hi, m - i, -1.0, np.inf, hp)
+        vlo, vhi = -vlo, -vhi
+    return vlo + (pos - i) * (vhi - vlo), vhi
 
 
 @njit(cache=True)
@@ -341,26 +404,29 @@ def running_quantile(x, half, q, step):
 
     Evaluated exactly at every ``step``-th sample (and the last) and interpolated linearly in
     between (the level it is used for varies over a stride, not a sample); NaN where the window
-    holds no finite value. Cost ``O(N / step * W)``.
+    holds no finite value. Cost ``O(N / step * W)``: one selection pass per node
+    (:func:`_quantile_select`), the finite count of each window from a running count.
     """
     n = x.shape[0]
     out = np.empty(n)
-    buf = np.empty(2 * half + 1)
+    hp = np.empty(2 * half + 1)
+    cnt = np.empty(n + 1, np.int64)  # finite values in x[:k]
+    cnt[0] = 0
+    for i in range(n):
+        cnt[i + 1] = cnt[i] + (1 if np.isfinite(x[i]) else 0)
     nodes = np.arange(0, n, max(step, 1))
     if nodes[-1] != n - 1:
         nodes = np.append(nodes, n - 1)
     val = np.empty(nodes.size)
+    guess = np.inf  # the previous node's order statistic i + 1 (_quantile_select)
     for j in range(nodes.size):
         k = nodes[j]
-        m = 0
-        for i in range(max(0, k - half), min(n, k + half + 1)):
-            if np.isfinite(x[i]):
-                buf[m] = x[i]
-                m += 1
+        lo, hi = max(0, k - half), min(n, k + half + 1)
+        m = cnt[hi] - cnt[lo]
         if m == 0:
             val[j] = np.nan
         else:
-            val[j] = _quantile_select(buf, m, q)
+            val[j], guess = _quantile_select(x, lo, hi, m, q, hp, guess)
     for j in range(nodes.size - 1):
         a, b = nodes[j], nodes[j + 1]
         va, vb = val[j], val[j + 1]

@@ -268,6 +268,26 @@ def test_running_quantile_matches_brute_force():
     assert np.max(np.abs(sparse - dense)) <= 8 / 200 * 0.5 + 1e-12
 
 
+@pytest.mark.parametrize("q", [0.0, 0.05, 0.5, 0.95, 1.0])
+def test_running_quantile_selection_ties_infinities_trends(q):
+    # a random walk (consecutive windows share their low values: the previous window's order
+    # statistic bounds the heap), rounded for ties, with NaN and +-inf left out
+    rng = np.random.default_rng(11)
+    x = np.round(np.cumsum(rng.normal(size=600)), 1)
+    x[rng.random(x.size) < 0.2] = np.nan
+    x[rng.random(x.size) < 0.03] = np.inf
+    x[rng.random(x.size) < 0.03] = -np.inf
+    for half, step in ((20, 1), (37, 5), (3, 2)):
+        nodes = np.append(np.arange(0, x.size, step), x.size - 1)
+        got = running_quantile(x, half, q, step)[nodes]
+        expect = []
+        for k in nodes:
+            v = x[max(0, k - half):k + half + 1]
+            v = v[np.isfinite(v)]
+            expect.append(np.quantile(v, q) if v.size else np.nan)
+        np.testing.assert_allclose(got, expect, rtol=0, atol=1e-12)
+
+
 @pytest.mark.parametrize("period", [0.72, 1.1, 1.6])
 def test_gait_period_of_a_periodic_statistic(period):
     dt = 0.005
