@@ -466,21 +466,11 @@ def stride_phases(res, imu, truth_z: np.ndarray) -> dict:
     -> heel strike (the peak of ``|f|`` in the last 0.3 s before the next stance) -> first
     sample of the next stance -> release.
     """
-    from insgnss.attitude import euler_to_dcm
+    from foot_loading import imu_point_truth
 
-    sol = res.forward
-    t = sol.index.to_numpy()
-    up = sol["up"].to_numpy()
-    up_row = np.array([euler_to_dcm(r, p, h)[2] for r, p, h in
-                       sol[["roll", "pitch", "heading"]].to_numpy()])
-    runs = _runs(res.stillness.still.to_numpy(bool))
-    swings = [(b0 - 1, a1) for (_, b0), (a1, _) in zip(runs[:-1], runs[1:], strict=True)
-              if t[a1] - t[b0 - 1] > 0.25]  # detector splits inside one stance are no swing
-    A = np.concatenate([up_row[a:b + 1] - up_row[a] for a, b in swings])
-    y = np.concatenate([(truth_z[a:b + 1] - truth_z[a]) - (up[a:b + 1] - up[a])
-                        for a, b in swings])
-    r = np.linalg.lstsq(A, y, rcond=None)[0]
-    err = up - (truth_z - up_row @ r)
+    d = imu_point_truth(res, truth_z)
+    t, up, runs, swings, r = d["t"], d["up"], d["runs"], d["swings"], d["r"]
+    err = up - d["z"]
     fn = np.linalg.norm(imu[["accel_x", "accel_y", "accel_z"]].to_numpy(), axis=1)
     dt = float(np.median(np.diff(t)))
     rows = []

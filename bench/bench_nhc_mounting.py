@@ -24,11 +24,10 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
 
-from filter_sim import car_truth, corrupt_imu, gnss_from_truth, nav_errors, perturbed_initial  # noqa: E402
+from filter_sim import car_outage_setup, car_truth, outage_end_error  # noqa: E402
 
 from insgnss.attitude import dcm_to_euler, euler_to_dcm, rotvec_to_dcm  # noqa: E402
-from insgnss.filter import BodyVelocity, FilterConfig, GnssPosition, GnssVelocity, run_filter  # noqa: E402
-from insgnss.imu import grade  # noqa: E402
+from insgnss.filter import BodyVelocity, run_filter  # noqa: E402
 
 KAPPA = np.radians(3.0) / 9.80665
 
@@ -55,27 +54,13 @@ def mounted_car(mu, duration: float = 300.0, rate: float = 50.0, seed_heading: f
 def run_case(seed: int, mu, misalignment: bool) -> tuple[float, np.ndarray]:
     rng = np.random.default_rng(seed)
     truth = mounted_car(mu, seed_heading=rng.uniform(0, 2 * np.pi))
-    model = grade("consumer")
-    imu, _ = corrupt_imu(truth, model, rng)
-    gnss = gnss_from_truth(truth, rng, rate=4.0, horizontal_std=0.02, vertical_std=0.03,
-                           velocity_std=0.03, vertical_velocity_std=0.05)
-    init, _ = perturbed_initial(truth, rng, 0.02, 0.03, (0.005, 0.005, 0.01))
     outages = [(40.0 + 45 * k, 55.0 + 45 * k) for k in range(6)]
-    t_g = gnss.index.to_numpy()
-    keep = np.ones(t_g.size, bool)
-    for a, b in outages:
-        keep &= ~((t_g >= a) & (t_g < b))
-    t = truth.index.to_numpy()
-    tn = np.arange(t[0] + 0.25, t[-1], 0.25)
-    cfg = FilterConfig(imu_model=model.scaled(gyro_arw=20 * model.gyro_arw), smoother=False,
-                       initial_att_std=(0.005, 0.005, 0.01))
+    imu, init, gnss, tn, cfg = car_outage_setup(truth, rng, outages)
     nhc = BodyVelocity(tn, 0.0, axes=(0, 2), std=0.1, name="nhc",
                        pitch_compliance_state="kappa",
                        misalignment_state="mis" if misalignment else None)
-    res = run_filter(imu, init, [GnssPosition(gnss[keep]), GnssVelocity(gnss[keep]), nhc], cfg)
-    e = nav_errors(res.forward, truth)
-    rows = e.index.get_indexer([b - 0.26 for _, b in outages], method="nearest")
-    end = np.hypot(e["east"].to_numpy()[rows], e["north"].to_numpy()[rows]).mean()
+    res = run_filter(imu, init, [*gnss, nhc], cfg)
+    end = outage_end_error(res.forward, truth, outages)
     est = (res.forward[["mis_x", "mis_y", "mis_z"]].iloc[-1].to_numpy() if misalignment
            else np.zeros(3))
     return float(end), est

@@ -27,12 +27,11 @@ from scipy.signal import lfilter
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
 
-from filter_sim import car_truth, corrupt_imu, gnss_from_truth, nav_errors, perturbed_initial  # noqa: E402
+from filter_sim import car_outage_setup, car_truth, outage_end_error, outage_rms  # noqa: E402
 
 from insgnss.attitude import dcm_to_euler, euler_to_dcm, rotvec_to_dcm  # noqa: E402
 from insgnss.autotune import innovation_terms  # noqa: E402
-from insgnss.filter import BodyVelocity, FilterConfig, GnssPosition, GnssVelocity, run_filter  # noqa: E402
-from insgnss.imu import grade  # noqa: E402
+from insgnss.filter import BodyVelocity, run_filter  # noqa: E402
 
 KAPPA = np.radians(3.0) / 9.80665
 GRID = (0.025, 0.05, 0.1, 0.2, 0.4)
@@ -95,20 +94,8 @@ def main() -> None:
     for i in range(args.seeds):
         rng = np.random.default_rng(args.first_seed + i)
         truth = slipping_car(rng, args.slip, args.tau)
-        model = grade("consumer")
-        imu, _ = corrupt_imu(truth, model, rng)
-        gnss = gnss_from_truth(truth, rng, rate=4.0, horizontal_std=0.02, vertical_std=0.03,
-                               velocity_std=0.03, vertical_velocity_std=0.05)
-        init, _ = perturbed_initial(truth, rng, 0.02, 0.03, (0.005, 0.005, 0.01))
         outages = [(40.0 + 45 * k, 55.0 + 45 * k) for k in range(6)]
-        t_g = gnss.index.to_numpy()
-        keep = np.ones(t_g.size, bool)
-        for a, b in outages:
-            keep &= ~((t_g >= a) & (t_g < b))
-        t = truth.index.to_numpy()
-        tn = np.arange(t[0] + 0.25, t[-1], 0.25)
-        cfg = FilterConfig(imu_model=model.scaled(gyro_arw=20 * model.gyro_arw),
-                           smoother=True, initial_att_std=(0.005, 0.005, 0.01))
+        imu, init, gnss, tn, cfg = car_outage_setup(truth, rng, outages, smoother=True)
         weights = None
         for j, s in enumerate(grid):
             extra = {} if args.violation_tau is None else {
@@ -117,20 +104,13 @@ def main() -> None:
             nhc = BodyVelocity(tn, 0.0, axes=(0, 2), std=[s, s], name="nhc",
                                pitch_compliance_state="kappa", misalignment_state="mis",
                                **extra)
-            res = run_filter(imu, init, [GnssPosition(gnss[keep]), GnssVelocity(gnss[keep]),
-                                         nhc], cfg)
+            res = run_filter(imu, init, [*gnss, nhc], cfg)
             terms = innovation_terms(res.innovations)
             if weights is None:
                 weights = {k: n for k, (n, _) in terms.items()}
             ll[i, j] = sum(weights[k] * terms[k][1] for k in weights if k in terms)
-            e = nav_errors(res.forward, truth)
-            rows = e.index.get_indexer([b - 0.26 for _, b in outages], method="nearest")
-            end[i, j] = np.hypot(e["east"].to_numpy()[rows], e["north"].to_numpy()[rows]).mean()
-            es = nav_errors(res.smoothed, truth)
-            ts = es.index.to_numpy()
-            srms[i, j] = np.mean([np.sqrt(np.mean(es["east"].to_numpy()[m] ** 2
-                                                  + es["north"].to_numpy()[m] ** 2))
-                                  for m in ((ts >= a) & (ts < b) for a, b in outages)])
+            end[i, j] = outage_end_error(res.forward, truth, outages)
+            srms[i, j] = outage_rms(res.smoothed, truth, outages)
         print(f"seed {args.first_seed + i}: one-step ML sigma {grid[int(np.argmax(ll[i]))]}, "
               f"least drift at {grid[int(np.argmin(end[i]))]}", flush=True)
         print(f"   end [m] {row(grid, end[i], '.2f')}\n   smoothed in-outage RMS [m] "

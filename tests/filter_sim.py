@@ -250,3 +250,48 @@ def polar_flight(rng: np.random.Generator, imu_grade: str = "tactical"):
     cfg = FilterConfig(imu_model=model, initial_pos_std=3.0, initial_vel_std=0.2,
                        initial_att_std=(0.005, 0.005, 0.02))
     return truth, sim.imu, gnss, x0, cfg
+
+
+def car_outage_setup(truth: pd.DataFrame, rng: np.random.Generator,
+                     outages: list[tuple[float, float]], *, smoother: bool = False):
+    """The simulated car of the NHC tests and benches: a consumer IMU (its gyros trusted at 20 x
+    the white noise, a running engine's vibration as a static window measures it), RTK GNSS
+    position and velocity at 4 Hz withheld in the half-open ``outages`` windows [s], an initial
+    state with small errors and the 4 Hz NHC epochs.
+
+    Returns ``(imu, init, gnss_measurements, nhc_times, cfg)``.
+    """
+    from insgnss.filter import FilterConfig, GnssPosition, GnssVelocity
+
+    model = grade("consumer")
+    imu, _ = corrupt_imu(truth, model, rng)
+    gnss = gnss_from_truth(truth, rng, rate=4.0, horizontal_std=0.02, vertical_std=0.03,
+                           velocity_std=0.03, vertical_velocity_std=0.05)
+    init, _ = perturbed_initial(truth, rng, 0.02, 0.03, (0.005, 0.005, 0.01))
+    t_g = gnss.index.to_numpy()
+    keep = np.ones(t_g.size, bool)
+    for a, b in outages:
+        keep &= ~((t_g >= a) & (t_g < b))
+    t = truth.index.to_numpy()
+    tn = np.arange(t[0] + 0.25, t[-1], 0.25)
+    cfg = FilterConfig(imu_model=model.scaled(gyro_arw=20 * model.gyro_arw), smoother=smoother,
+                       initial_att_std=(0.005, 0.005, 0.01))
+    return imu, init, [GnssPosition(gnss[keep]), GnssVelocity(gnss[keep])], tn, cfg
+
+
+def outage_end_error(solution: pd.DataFrame, truth: pd.DataFrame,
+                     outages: list[tuple[float, float]]) -> float:
+    """Mean horizontal error [m] at the last 4 Hz epoch of each outage window."""
+    e = nav_errors(solution, truth)
+    rows = e.index.get_indexer([b - 0.26 for _, b in outages], method="nearest")
+    return float(np.hypot(e["east"].to_numpy()[rows], e["north"].to_numpy()[rows]).mean())
+
+
+def outage_rms(solution: pd.DataFrame, truth: pd.DataFrame,
+               outages: list[tuple[float, float]]) -> float:
+    """Mean over the outage windows of the horizontal RMS error inside each [m]."""
+    e = nav_errors(solution, truth)
+    ts = e.index.to_numpy()
+    east, north = e["east"].to_numpy(), e["north"].to_numpy()
+    return float(np.mean([np.sqrt(np.mean(east[w] ** 2 + north[w] ** 2))
+                          for w in ((ts >= a) & (ts < b) for a, b in outages)]))

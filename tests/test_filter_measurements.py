@@ -8,11 +8,14 @@ import pandas as pd
 import pytest
 from filter_sim import (
     DEG,
+    car_outage_setup,
     car_truth,
     corrupt_imu,
     gnss_from_truth,
     initial_with_error,
     nav_errors,
+    outage_end_error,
+    outage_rms,
     perturbed_initial,
     static_truth,
     stop_windows,
@@ -385,28 +388,13 @@ def test_nhc_pitch_compliance_estimated_and_removes_outage_drift():
     recovered (within 3 sigma, sigma < 15 %) and halves the end-of-outage error."""
     kappa = np.radians(3.0) / 9.80665
     truth = _squatting_car(kappa, 240.0)
-    model = grade("consumer")
-    rng = np.random.default_rng(7)
-    imu, _ = corrupt_imu(truth, model, rng)
-    gnss = gnss_from_truth(truth, rng, rate=4.0, horizontal_std=0.02, vertical_std=0.03,
-                           velocity_std=0.03, vertical_velocity_std=0.05)
-    init, _ = perturbed_initial(truth, rng, 0.02, 0.03, (0.005, 0.005, 0.01))
     outages = [(100.0 + 45 * k, 115.0 + 45 * k) for k in range(3)]
-    t_g = gnss.index.to_numpy()
-    keep = np.ones(t_g.size, bool)
-    for a, b in outages:
-        keep &= ~((t_g >= a) & (t_g < b))
-    t = truth.index.to_numpy()
-    tn = np.arange(t[0] + 0.25, t[-1], 0.25)
-    cfg = FilterConfig(imu_model=model.scaled(gyro_arw=20 * model.gyro_arw), smoother=False,
-                       initial_att_std=(0.005, 0.005, 0.01))
+    imu, init, gnss, tn, cfg = car_outage_setup(truth, np.random.default_rng(7), outages)
     ends = {}
     for state in (None, "kappa"):
         nhc = BodyVelocity(tn, 0.0, axes=(0, 2), std=0.1, name="nhc", pitch_compliance_state=state)
-        res = run_filter(imu, init, [GnssPosition(gnss[keep]), GnssVelocity(gnss[keep]), nhc], cfg)
-        e = nav_errors(res.forward, truth)
-        rows = e.index.get_indexer([b - 0.26 for _, b in outages], method="nearest")
-        ends[state] = np.hypot(e["east"].to_numpy()[rows], e["north"].to_numpy()[rows]).mean()
+        res = run_filter(imu, init, [*gnss, nhc], cfg)
+        ends[state] = outage_end_error(res.forward, truth, outages)
         if state:
             k_est, k_std = res.forward["kappa"].iloc[-1], res.forward["kappa_std"].iloc[-1]
             assert abs(k_est - kappa) < 3 * k_std and k_std < 0.15 * kappa, (k_est, k_std)
@@ -427,28 +415,12 @@ def test_nhc_misalignment_states_remove_the_drift_of_a_residual_mounting():
         C = euler_to_dcm(truth["roll"].to_numpy(), truth["pitch"].to_numpy(),
                          truth["heading"].to_numpy()) @ rotvec_to_dcm(m)
         truth["roll"], truth["pitch"], truth["heading"] = dcm_to_euler(C)
-        model = grade("consumer")
-        rng = np.random.default_rng(7)
-        imu, _ = corrupt_imu(truth, model, rng)
-        gnss = gnss_from_truth(truth, rng, rate=4.0, horizontal_std=0.02, vertical_std=0.03,
-                               velocity_std=0.03, vertical_velocity_std=0.05)
-        init, _ = perturbed_initial(truth, rng, 0.02, 0.03, (0.005, 0.005, 0.01))
         outages = [(55.0 + 45 * k, 70.0 + 45 * k) for k in range(4)]
-        t_g = gnss.index.to_numpy()
-        keep = np.ones(t_g.size, bool)
-        for a, b in outages:
-            keep &= ~((t_g >= a) & (t_g < b))
-        t = truth.index.to_numpy()
-        tn = np.arange(t[0] + 0.25, t[-1], 0.25)
-        cfg = FilterConfig(imu_model=model.scaled(gyro_arw=20 * model.gyro_arw), smoother=False,
-                           initial_att_std=(0.005, 0.005, 0.01))
+        imu, init, gnss, tn, cfg = car_outage_setup(truth, np.random.default_rng(7), outages)
         nhc = BodyVelocity(tn, 0.0, axes=(0, 2), std=0.1, name="nhc",
                            pitch_compliance_state="kappa", misalignment_state=state)
-        res = run_filter(imu, init, [GnssPosition(gnss[keep]), GnssVelocity(gnss[keep]), nhc], cfg)
-        e = nav_errors(res.forward, truth)
-        rows = e.index.get_indexer([b - 0.26 for _, b in outages], method="nearest")
-        ends[case, state] = np.hypot(e["east"].to_numpy()[rows],
-                                     e["north"].to_numpy()[rows]).mean()
+        res = run_filter(imu, init, [*gnss, nhc], cfg)
+        ends[case, state] = outage_end_error(res.forward, truth, outages)
         if state:
             # C_b = C_v exp([mu x]): the vehicle velocity is (I + [mu x]) v_b, the state -mu
             last = res.forward.iloc[-1]
@@ -497,35 +469,17 @@ def test_nhc_violation_states_on_a_slipping_car():
 
     rng = np.random.default_rng(300)
     truth = slipping_car(rng, 0.1, 2.0, duration=200.0)
-    model = grade("consumer")
-    imu, _ = corrupt_imu(truth, model, rng)
-    gnss = gnss_from_truth(truth, rng, rate=4.0, horizontal_std=0.02, vertical_std=0.03,
-                           velocity_std=0.03, vertical_velocity_std=0.05)
-    init, _ = perturbed_initial(truth, rng, 0.02, 0.03, (0.005, 0.005, 0.01))
     outages = [(40.0 + 45 * k, 55.0 + 45 * k) for k in range(4)]
-    t_g = gnss.index.to_numpy()
-    keep = np.ones(t_g.size, bool)
-    for a, b in outages:
-        keep &= ~((t_g >= a) & (t_g < b))
-    t = truth.index.to_numpy()
-    tn = np.arange(t[0] + 0.25, t[-1], 0.25)
-    cfg = FilterConfig(imu_model=model.scaled(gyro_arw=20 * model.gyro_arw), smoother=True,
-                       initial_att_std=(0.005, 0.005, 0.01))
+    imu, init, gnss, tn, cfg = car_outage_setup(truth, rng, outages, smoother=True)
     out = {}
     for case, kw in (("white", {"std": 0.1}),
                      ("violation", {"std": 0.02, "violation_state": "slip",
                                     "violation_std": 0.1, "violation_tau": 1.0})):
         nhc = BodyVelocity(tn, 0.0, axes=(0, 2), name="nhc", pitch_compliance_state="kappa",
                            misalignment_state="mis", **kw)
-        res = run_filter(imu, init, [GnssPosition(gnss[keep]), GnssVelocity(gnss[keep]), nhc], cfg)
-        e = nav_errors(res.forward, truth)
-        rows = e.index.get_indexer([b - 0.26 for _, b in outages], method="nearest")
-        end = np.hypot(e["east"].to_numpy()[rows], e["north"].to_numpy()[rows]).mean()
-        es = nav_errors(res.smoothed, truth)
-        ts = es.index.to_numpy()
-        rms = np.mean([np.sqrt(np.mean(es["east"].to_numpy()[w] ** 2 + es["north"].to_numpy()[w] ** 2))
-                       for w in ((ts >= a) & (ts < b) for a, b in outages)])
-        out[case] = (end, rms)
+        res = run_filter(imu, init, [*gnss, nhc], cfg)
+        out[case] = (outage_end_error(res.forward, truth, outages),
+                     outage_rms(res.smoothed, truth, outages))
     assert out["violation"][0] < 0.9 * out["white"][0], out
     assert out["violation"][1] < 0.67 * out["white"][1], out
 

@@ -53,7 +53,7 @@ from ..errors import ConfigError, FilterHealthError
 from ..mechanization.strapdown import STEP_WORK_SHAPE
 from . import gating, health
 from .kernels import _euler_std, apply_feedback_into, interval_step, store_nav
-from .linalg import _innovation_cov, cholesky_into, tri_solve
+from .linalg import _innovation_cov, cholesky_into, hp_rows, s_block, tri_solve
 from .measurements import Measurement, evaluate_compiled
 
 __all__ = ["HighRate", "dense_segment"]
@@ -227,24 +227,9 @@ def _innovation_cov_blocks(H, P, R, off, nm, HP, S, n):
     ``S[o0:o1, o0:o1] = H P H^T + R`` of the measurements ``k < nm`` (rows ``off[k] ..
     off[k+1]-1``): what gating and the innovation log read when the measurements are applied
     one row at a time (:func:`_sequential_update`); the zeros of ``H`` are skipped."""
-    for a in range(off[nm]):
-        for j in range(n):
-            HP[a, j] = 0.0
-        for q in range(n):
-            h = H[a, q]
-            if h != 0.0:
-                for j in range(n):
-                    HP[a, j] += h * P[q, j]
+    hp_rows(H, P, off[nm], HP, n)
     for k in range(nm):
-        for a in range(off[k], off[k + 1]):
-            for b in range(off[k], a + 1):
-                v = R[a, b]
-                for q in range(n):
-                    h = H[b, q]
-                    if h != 0.0:
-                        v += HP[a, q] * h
-                S[a, b] = v
-                S[b, a] = v
+        s_block(H, R, HP, off[k], off[k + 1], S, n)
 
 
 @njit(cache=True)

@@ -132,11 +132,9 @@ def matvec_t(A, x, out):
 
 
 @njit(cache=True)
-def _innovation_cov(H, P, R, m, HP, S, n=-1):
-    """``HP = H P`` and ``S = H P H^T + R`` for the first ``m`` rows (``n``: the state
-    dimension, default from ``P``)."""
-    if n < 0:
-        n = P.shape[0]
+def hp_rows(H, P, m, HP, n):
+    """``HP = H P`` for the first ``m`` rows of ``H``, skipping its zeros (a ZUPT or GNSS row
+    selects a few states)."""
     for a in range(m):
         for j in range(n):
             HP[a, j] = 0.0
@@ -145,8 +143,24 @@ def _innovation_cov(H, P, R, m, HP, S, n=-1):
             if h != 0.0:
                 for j in range(n):
                     HP[a, j] += h * P[q, j]
-    for a in range(m):
-        for b in range(a + 1):
+
+
+@njit(cache=True)
+def _innovation_cov(H, P, R, m, HP, S, n=-1):
+    """``HP = H P`` and ``S = H P H^T + R`` for the first ``m`` rows (``n``: the state
+    dimension, default from ``P``)."""
+    if n < 0:
+        n = P.shape[0]
+    hp_rows(H, P, m, HP, n)
+    s_block(H, R, HP, 0, m, S, n)
+
+
+@njit(cache=True)
+def s_block(H, R, HP, o0, o1, S, n):
+    """The symmetric block ``S[o0:o1, o0:o1] = H P H^T + R`` of the rows ``o0 .. o1-1`` from
+    ``HP = H P``, skipping the zeros of ``H``."""
+    for a in range(o0, o1):
+        for b in range(o0, a + 1):
             v = R[a, b]
             for q in range(n):
                 h = H[b, q]
