@@ -733,6 +733,18 @@ def estimate_gravity(gyro: np.ndarray, acc: np.ndarray, window: int) -> float:
     return float(np.median(np.linalg.norm(acc[idx], axis=1)))
 
 
+def in_intervals(t: np.ndarray, intervals, pad: float = 0.0) -> np.ndarray:
+    """Samples of the increasing times ``t`` inside any closed interval ``[a - pad, b + pad]``
+    of ``intervals`` (pairs ``(a, b)``), by binary search: one pass whatever their number."""
+    t = np.asarray(t, float)
+    edges = np.zeros(t.size + 1, np.int64)
+    iv = np.asarray(list(intervals), float).reshape(-1, 2)
+    if iv.size:
+        np.add.at(edges, np.searchsorted(t, iv[:, 0] - pad, side="left"), 1)
+        np.add.at(edges, np.searchsorted(t, iv[:, 1] + pad, side="right"), -1)
+    return np.cumsum(edges[:-1]) > 0
+
+
 def sample_count(seconds: float, dt: float) -> int:
     """Number of samples spanning ``seconds`` at interval ``dt`` (at least 1)."""
     return max(1, int(round(seconds / dt)))
@@ -1024,10 +1036,8 @@ def find_static_windows(imu: pd.DataFrame, *, max_accel_std: float, max_rate_std
     sa = amv_statistic(np.require(acc, float, ["C", "W"]), w)
     sw = amv_statistic(np.require(gyro, float, ["C", "W"]), w)
     fa, fw = float(np.quantile(sa, FLOOR_QUANTILE)), float(np.quantile(sw, FLOOR_QUANTILE))
-    ok = np.ones(t.size, bool)
-    half = 0.5 * window  # a sample whose window reaches into an excluded interval
-    for a, b in exclude:
-        ok &= ~((t >= a - half) & (t <= b + half))
+    # a sample whose window reaches into an excluded interval
+    ok = ~in_intervals(t, exclude, pad=0.5 * window)
     stationary = ok & (sa <= max_accel_std) & (sw <= max_rate_std)
     still = stationary & (sa <= floor_factor * fa) & (sw <= floor_factor * fw)
     n_min, n_margin = sample_count(min_duration, dt), sample_count(margin, dt)

@@ -381,3 +381,22 @@ def test_static_windows_tell_still_from_stationary():
     sw2 = find_static_windows(imu, max_accel_std=1.0, max_rate_std=np.radians(10.0),
                               exclude=[(2.0, 2.1)])
     assert [s for s in sw2.still if s[0] < 1.0][0][1] < 2.0
+
+
+def test_in_intervals_matches_the_interval_by_interval_mask():
+    """One binary-search pass gives the closed-interval mask of every interval (padded,
+    overlapping, empty, outside the samples) that testing each interval in turn gives."""
+    from insgnss.detect import in_intervals
+
+    rng = np.random.default_rng(11)
+    t = np.sort(rng.uniform(0.0, 100.0, 4000))
+    starts = rng.uniform(0.0, 100.0, 40)
+    iv = [(a, a + d) for a, d in zip(starts, rng.uniform(0.0, 3.0, 40), strict=True)]
+    iv += [(float(t[7]), float(t[7])), (-10.0, -5.0), (99.0, 200.0)]
+    for pad in (0.0, 0.7):
+        ref = np.zeros(t.size, bool)
+        for a, b in iv:
+            ref |= (t >= a - pad) & (t <= b + pad)
+        assert np.array_equal(in_intervals(t, iv, pad), ref)
+    assert ref.any() and not ref.all()
+    assert not in_intervals(t, []).any()

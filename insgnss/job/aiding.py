@@ -172,7 +172,7 @@ def stillness_times(job: Job, imu: pd.DataFrame, static: pd.DataFrame | None = N
     still = np.zeros(t.size, bool)
     thr = None
     if a["detector"] or not a["static_intervals"]:
-        from ..detect import DetectorConfig, detect_stillness
+        from ..detect import DetectorConfig, detect_stillness, in_intervals
 
         if a["detector"]:
             cfg = DetectorConfig.from_dict(a["detector"])
@@ -183,10 +183,7 @@ def stillness_times(job: Job, imu: pd.DataFrame, static: pd.DataFrame | None = N
                     static, job["initialization"]["static_max_accel_std"])
             thr = float(spec["threshold"])
             cfg = DetectorConfig(**spec)
-        det = detect_stillness(imu, cfg).still.to_numpy(bool).copy()
-        for m0, m1 in moving or []:
-            det[(t >= m0) & (t <= m1)] = False
-        still |= det
+        still |= detect_stillness(imu, cfg).still.to_numpy(bool) & ~in_intervals(t, moving or ())
     for a0, a1 in a["static_intervals"] or []:
         still |= (t >= a0) & (t <= a1)
     ts = t[still]

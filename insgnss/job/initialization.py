@@ -533,12 +533,8 @@ def _heading_in_motion(job: Job, imu, gnss, res, w_mean, model: ImuErrorModel,
     C0 = euler_to_dcm(res.roll, res.pitch, 0.0)
     seg[GYRO_COLS] = seg[GYRO_COLS].to_numpy() - (w_mean - C0.T @ earth_rate_l(lat0))
 
-    def run(roll, pitch, table=seg):
-        x0 = NavState.from_euler(lat0, lon0, h0, (0, 0, 0), roll, pitch, 0.0, time=t_s)
-        return mechanize(table, x0, fix_height=True)
-
-    roll, pitch = res.roll, res.pitch
-    m = run(roll, pitch)
+    x0 = NavState.from_euler(lat0, lon0, h0, (0, 0, 0), res.roll, res.pitch, 0.0, time=t_s)
+    m = mechanize(seg, x0, fix_height=True)
     tm = m.index.to_numpy(float)
     tg = tg[tg <= tm[-1]]
     if tg.size < 3:
