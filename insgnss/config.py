@@ -683,6 +683,12 @@ SCHEMA: dict[str, Any] = {
                                "violation (vibration at the IMU) [m/s], with "
                                "aiding.nhc_correlation_time > 0", check=_vector(2, POSITIVE),
                                when=_on("aiding.nhc")),
+        "nhc_violation_from_data": _spec(bool, False, "measure the NHC's violations (sigma per "
+                                         "axis, correlation time) in the smoothed body-frame "
+                                         "velocity of a first pass outside the outages and run "
+                                         "again with them as Gauss-Markov states "
+                                         "(aiding.nhc_std, aiding.nhc_correlation_time; "
+                                         "strapdown)", when=_on("aiding.nhc")),
         "nhc_misalignment": _spec(bool, False, "estimate the residual IMU-to-vehicle pitch/yaw "
                                   "misalignment in the NHC (strapdown process model)",
                                   when=_on("aiding.nhc")),
@@ -758,6 +764,11 @@ SCHEMA: dict[str, Any] = {
                             choices=["gauss_markov", "random_walk", "random_constant"]),
         "scale_factors": _spec(bool, False, "estimate IMU scale factors"),
         "smoother": _spec(bool, True, "RTS smoother after the forward filter"),
+        "smoother_passes": _spec(int, 1, "passes of filter and smoother (strapdown): 2 runs "
+                                 "the filter again from the first pass's smoothed start state "
+                                 "and parameter states (re-linearized; prior sigmas kept), "
+                                 "which makes the forward solution non-causal",
+                                 check=_integer(1)),
         "store_memory_mb": _spec(_NUM, 64.0, "memory [MiB] for the engine's stored arrays (the "
                                  "smoother's per-epoch store, the IMU-rate forward and smoothed "
                                  "tables); beyond it they are memory-mapped in the output folder "

@@ -138,6 +138,12 @@ class FilterConfig:
         Override the IMU model's values.
     gyro_bias, accel_bias : 3-vector, optional
         Initial nominal bias estimates (e.g. from alignment).
+    initial_parameters : dict, optional
+        Initial nominal values of parameter states by state label (``"gyro_bias_z"``,
+        ``"nhc_misalignment_x"``, ...; index 9 onwards of the layout), applied after
+        ``gyro_bias`` / ``accel_bias`` and the extra states' ``initial_value``; the initial
+        sigmas are unchanged. Used to re-linearize a second pass about the smoothed estimate of
+        a first one (``[filter] smoother_passes``); labels the layout does not hold are ignored.
     gravity_model, attitude_update, coning
         Mechanization options (see :func:`insgnss.mechanization.strapdown.mechanize`).
     snap_tolerance : float
@@ -201,6 +207,7 @@ class FilterConfig:
     initial_accel_scale_std: float | tuple | None = None
     gyro_bias: tuple | None = None
     accel_bias: tuple | None = None
+    initial_parameters: dict | None = None
     gravity_model: str = "somigliana"
     attitude_update: str = "exact"
     coning: bool = False

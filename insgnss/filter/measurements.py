@@ -691,6 +691,10 @@ class BodyVelocity(Measurement):
         Name of a 3-element IMU-to-vehicle misalignment state (random constant).
     misalignment_std : float
         Initial sigma of the misalignment [rad].
+    misalignment_initial : 3-vector
+        Initial nominal value of the misalignment [rad] (default 0: the declared mounting), e.g.
+        a smoothed estimate of an earlier pass over the same data (``aiding.
+        nhc_misalignment_relinearize``).
     pitch_compliance_state : str, optional
         Name of a 1-element suspension pitch-compliance state ``kappa`` [rad / (m/s^2)]
         (random constant, zero initial value; needs the vertical axis 2 and the Python update
@@ -716,6 +720,7 @@ class BodyVelocity(Measurement):
                  lever_arm=(0.0, 0.0, 0.0), scale_state: str | None = None, scale_axis: int = 1,
                  scale_std: float = 0.01, scale_psd: float = 0.0,
                  misalignment_state: str | None = None, misalignment_std: float = 0.02,
+                 misalignment_initial=(0.0, 0.0, 0.0),
                  pitch_compliance_state: str | None = None,
                  pitch_compliance_std: float = PITCH_COMPLIANCE_STD,
                  gate_probability: float | None = None, name: str | None = None,
@@ -765,6 +770,7 @@ class BodyVelocity(Measurement):
         self.scale_psd = float(scale_psd)
         self.misalignment_state = misalignment_state
         self.misalignment_std = float(misalignment_std)
+        self.misalignment_initial = _vec3(misalignment_initial, "misalignment_initial")
 
     def extra_states(self):
         out = []
@@ -772,6 +778,8 @@ class BodyVelocity(Measurement):
             out.append(ExtraState(self.scale_state, 1, self.scale_std, np.inf, self.scale_psd))
         if self.misalignment_state:
             out.append(ExtraState(self.misalignment_state, 3, self.misalignment_std,
+                                  initial_value=tuple(float(x)
+                                                      for x in self.misalignment_initial),
                                   labels=(f"{self.misalignment_state}_x",
                                           f"{self.misalignment_state}_y",
                                           f"{self.misalignment_state}_z")))

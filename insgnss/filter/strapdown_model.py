@@ -147,6 +147,9 @@ class StrapdownModel(ProcessModelBase):
         self.vel = np.array(initial.vel, float).copy()
         self.C = np.ascontiguousarray(initial.C, dtype=float).copy()
         self.pnom = pm.initial_values.copy()
+        for label, value in (config.initial_parameters or {}).items():
+            if label in layout.labels and layout.labels.index(label) >= 9:
+                self.pnom[layout.labels.index(label) - 9] = float(value)
         self.par_decay = pm.decay[9:].copy()
         self.has_decay = bool(np.any(self.par_decay > 0))
         # coupled augmenting states: their nominal follows p' = (Fx - diag(decay)) p

@@ -168,14 +168,16 @@ def _with_vibration_noise(ctx: RunContext, tuned: Tuned, imu, cfg: FilterConfig)
 
 
 def _strapdown_filter(ctx: RunContext, tuned: Tuned, smoother: bool = True,
-                      init: Initialization | None = None):
+                      init: Initialization | None = None,
+                      initial_parameters: dict | None = None):
     """Initialize (unless ``init``, the initialization of this job, inputs, model and windows,
     is given), build the aiding and run the strapdown filter for a (tuned) job:
     ``(filter result, initialization, aiding, IMU table)``. ``smoother=False`` is a run of the
     self-tuning: no smoother, no progress bar, no innovation gate and no runaway-NIS stop (a
     candidate noise model that fits badly is judged by its likelihood - robust to outliers,
     :mod:`insgnss.autotune` - not stopped or cut off by the gate, which would make the
-    likelihood jump between nearby candidates)."""
+    likelihood jump between nearby candidates). ``initial_parameters``: nominal start values
+    of parameter states by label (:attr:`FilterConfig.initial_parameters`)."""
     job, inputs, model = tuned.job, tuned.inputs, tuned.model
     if init is None:
         init = initialize(job, inputs, model, tuned.windows)
@@ -185,6 +187,7 @@ def _strapdown_filter(ctx: RunContext, tuned: Tuned, smoother: bool = True,
     aiding.require()
     cfg = filter_config(job, model, init, ctx.spill_dir)
     cfg.smoother = cfg.smoother and smoother
+    cfg.initial_parameters = initial_parameters
     if not smoother:  # a self-tuning run: the likelihood judges the model, not the gate
         cfg.nis_window = None
         cfg.gate_probability = None
@@ -205,6 +208,64 @@ def _strapdown_filter(ctx: RunContext, tuned: Tuned, smoother: bool = True,
     if smoother:
         trim_heap()  # the increments, the smoother's temporaries (a long log: 100s of MiB)
     return res, init, aiding, imu
+
+
+def relinearized_start(init: Initialization, smoothed) -> tuple[Initialization, dict]:
+    """The start of a re-linearized pass (``[filter] smoother_passes`` = 2): the navigation
+    state and parameter states (biases, scale factors, misalignment, pitch compliance, ...) of
+    the smoothed table ``smoothed`` at its first row (the filter's start, ``init.state.time``),
+    with the sigmas of ``init``. Returns ``(initialization, initial_parameters)``.
+
+    The first pass's smoother already uses every epoch; the second pass integrates the same
+    data about that estimate, so the errors the filter linearizes about (the heading before
+    the GNSS course fixes it, the mounting before the misalignment states converge) are the
+    small residuals of the first pass rather than the prior's: one Gauss-Newton step of an
+    iterated smoother (Bell 1994), with the prior sigmas kept (the prior mean moves to the first
+    pass's estimate, well inside those sigmas).
+    """
+    from ..mechanization import NavState
+
+    row = smoothed.iloc[0]
+    st = init.state
+    state = NavState.from_euler(float(row["lat"]), float(row["lon"]), float(row["height"]),
+                                row[["vel_e", "vel_n", "vel_u"]].to_numpy(float),
+                                float(row["roll"]), float(row["pitch"]), float(row["heading"]),
+                                time=float(st.time))
+    state.wander_angle = st.wander_angle
+    skip = {"lat", "lon", "height", "vel_e", "vel_n", "vel_u", "roll", "pitch", "heading",
+            "time", "segment"}
+    pars = {c: float(row[c]) for c in smoothed.columns
+            if c not in skip and not c.endswith("_std") and np.isfinite(row[c])}
+    gb = [pars.get(f"gyro_bias_{a}") for a in "xyz"]
+    return replace(init, state=state,
+                   gyro_bias=None if None in gb else np.array(gb, float)), pars
+
+
+def _with_measured_violation(ctx: RunContext, tuned: Tuned, smoothed) -> Tuned:
+    """``aiding.nhc_violation_from_data``: the NHC's violation measured in the first pass's
+    smoothed solution (:func:`insgnss.nhc_violation.nhc_violation_estimate`) becomes the
+    Gauss-Markov violation states of the next pass (``aiding.nhc_std`` its sigmas,
+    ``aiding.nhc_correlation_time`` its correlation time; ``aiding.nhc_white_std`` stays the
+    white part); recorded in ``summary.json`` ``preprocessing.nhc_violation``. A measurement
+    without a correlation time or a finite sigma keeps the job's constraint (and warns)."""
+    import copy
+
+    from ..nhc_violation import nhc_violation_estimate
+
+    est = nhc_violation_estimate(smoothed, tuned.windows)
+    info = est.as_dict()
+    ok = est.tau > 0 and all(np.isfinite(s) and s > 0 for s in est.std)
+    info["applied"] = ok
+    ctx.preprocessing["nhc_violation"] = info
+    if not ok:
+        warn(f"the NHC violation could not be measured ({est.samples} moving samples outside "
+             f"the outages, correlation time {est.tau:.3g} s): the constraint of "
+             f"aiding.nhc_std is kept", file=tuned.job.path, column="aiding.nhc_violation_from_data")
+        return tuned
+    settings = copy.deepcopy(tuned.job.settings)
+    settings["aiding"]["nhc_std"] = [float(s) for s in est.std]
+    settings["aiding"]["nhc_correlation_time"] = float(est.tau)
+    return replace(tuned, job=replace(tuned.job, settings=settings))
 
 
 def _static_window(inputs, init: Initialization):
@@ -240,6 +301,20 @@ def run_strapdown(ctx: RunContext) -> JobResult:
     # search over the whole log is not repeated)
     same = tuned.job is job and tuned.inputs is inputs and tuned.model is first
     res, init, aiding, imu = _strapdown_filter(ctx, tuned, init=init if same else None)
+    relin = job["filter"]["smoother_passes"] > 1
+    from_data = bool(job["aiding"]["nhc"] and job["aiding"]["nhc_violation_from_data"])
+    for k in range(max(job["filter"]["smoother_passes"] - 1, int(from_data))):
+        if not (res.complete and res.smoothed is not None):
+            break
+        if from_data and k == 0:
+            tuned = _with_measured_violation(ctx, tuned, res.smoothed)
+        pars = None
+        if relin:
+            init, pars = relinearized_start(init, res.smoothed)
+        res, init, aiding, imu = _strapdown_filter(ctx, tuned, init=init,
+                                                   initial_parameters=pars)
+    if tuned.job is not job and tune_result is None:
+        ctx = replace(ctx, job=tuned.job)
     if tune_result is not None:
         ctx = replace(ctx, job=tuned.job, inputs=tuned.inputs)
     return _filter_result(ctx, init, res, aiding, tuned.model, len(imu),
