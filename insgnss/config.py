@@ -688,7 +688,8 @@ SCHEMA: dict[str, Any] = {
                                          "velocity of a first pass outside the outages and run "
                                          "again with them as Gauss-Markov states "
                                          "(aiding.nhc_std, aiding.nhc_correlation_time; "
-                                         "strapdown)", when=_on("aiding.nhc")),
+                                         "strapdown)",
+                                         when=(_on("aiding.nhc"), _on("filter.smoother"))),
         "nhc_misalignment": _spec(bool, False, "estimate the residual IMU-to-vehicle pitch/yaw "
                                   "misalignment in the NHC (strapdown process model)",
                                   when=_on("aiding.nhc")),
@@ -768,7 +769,7 @@ SCHEMA: dict[str, Any] = {
                                  "the filter again from the first pass's smoothed start state "
                                  "and parameter states (re-linearized; prior sigmas kept), "
                                  "which makes the forward solution non-causal",
-                                 check=_integer(1)),
+                                 check=_integer(1), when=_on("filter.smoother")),
         "store_memory_mb": _spec(_NUM, 64.0, "memory [MiB] for the engine's stored arrays (the "
                                  "smoother's per-epoch store, the IMU-rate forward and smoothed "
                                  "tables); beyond it they are memory-mapped in the output folder "

@@ -152,3 +152,23 @@ def test_measured_violation_reaches_the_job_and_the_summary():
     with pytest.warns(Warning):
         same = _with_measured_violation(ctx, Tuned(job, None, None, []), flat)
     assert same.job is job and not ctx.preprocessing["nhc_violation"]["applied"]
+
+
+def test_passes_over_the_smoother_need_the_smoother():
+    """Both mechanisms read the first pass's smoothed solution: without the smoother the job
+    stops before any computation and names the key, instead of silently running one pass."""
+    import tomllib
+    from pathlib import Path
+
+    from insgnss.config import load_job_dict
+    from insgnss.errors import ConfigError
+
+    path = Path(__file__).resolve().parents[1] / "scenarios" / "drive_0708.toml"
+    for section, key, value in (("aiding", "nhc_violation_from_data", True),
+                                ("filter", "smoother_passes", 2)):
+        data = tomllib.loads(path.read_text())
+        data.setdefault("filter", {})["smoother"] = False
+        data.setdefault(section, {})[key] = value
+        with pytest.raises(ConfigError, match="filter.smoother = true") as err:
+            load_job_dict(data, path)
+        assert f"{section}.{key}" in str(err.value)
