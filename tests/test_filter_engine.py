@@ -25,6 +25,7 @@ from insgnss.filter import (
     Measurement,
     run_filter,
 )
+from insgnss.filter.store import dense_rows
 from insgnss.imu import grade, increments
 from insgnss.mechanization.inverse import inverse_mechanize
 from insgnss.mechanization.strapdown import NAV_COLS, mechanize
@@ -139,8 +140,14 @@ def test_forward_only_run_keeps_innovations_and_forward(case):
     pd.testing.assert_frame_equal(fwd.innovations, full.innovations)
     pd.testing.assert_frame_equal(fwd.forward, full.forward)
     assert np.array_equal(fwd.feedback, full.feedback) and np.abs(fwd.feedback).sum() > 0
-    assert full.updates["H"].shape[0] == 6 * len(gnss)
-    assert fwd.updates["H"].shape[0] == 0 and fwd.smoothed is None and fwd.complete
+    assert full.updates["s"].shape[0] == 6 * len(gnss)
+    assert full.updates["H_ptr"].shape[0] == 6 * len(gnss) + 1
+    # H kept by its non-zeros: the dense rows hold exactly the stored entries, none zero
+    H = dense_rows(full.updates["H_ptr"], full.updates["H_col"], full.updates["H_val"], 0, 6,
+                   full.layout.n)
+    assert np.count_nonzero(H) == full.updates["H_ptr"][6] > 0
+    assert np.all(full.updates["H_val"] != 0.0)
+    assert fwd.updates["s"].shape[0] == 0 and fwd.smoothed is None and fwd.complete
     bad = run_filter(imu, init, [GnssPosition(gnss), _Bad([30.0])],
                      FilterConfig(imu_model="tactical", gate_probability=None, smoother=False))
     assert not bad.complete and "30.0" in str(bad.error)

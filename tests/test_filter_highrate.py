@@ -11,6 +11,7 @@ from filter_sim import car_truth, corrupt_imu, gnss_from_truth, nav_errors, pert
 from insgnss.errors import ConfigError
 from insgnss.filter import BodyVelocity, FilterConfig, GnssPosition, Zaru, Zupt, run_filter
 from insgnss.filter.smoother import rts_error_state
+from insgnss.filter.store import dense_rows
 from insgnss.imu import grade
 
 
@@ -93,7 +94,8 @@ def _rebuild(res):
                 P = hrd["Pp"][hrd["Pp_index"][h]]
             Pp.append(P)
             r = slice(hrd["r0"][h], hrd["r1"][h])
-            H, K = up["H"][r], up["K"][r].T
+            H = dense_rows(up["H_ptr"], up["H_col"], up["H_val"], r.start, r.stop, n)
+            K = up["K"][r].T
             P = (np.eye(n) - K @ H) @ P
             P = 0.5 * (P + P.T)
             Pf.append(P)
@@ -262,3 +264,56 @@ def test_sequential_rows_give_the_stacked_update():
     P[3, 3] = -1.0
     assert not _sequential_update(P, H, z, rd, m, x, Kt, s, np.empty(n), np.empty(n),
                                   np.empty(n, np.int64), np.empty(n), n)
+
+
+def test_row_pattern_gives_the_dense_innovation_blocks():
+    """H P and the diagonal blocks of S formed from the non-zeros of the rows (the row pattern
+    the compiled path finds once per sample) are the dense sums bit for bit, and the pattern
+    holds exactly the non-zero columns of each row."""
+    from insgnss.filter.highrate import _innovation_cov_blocks, row_pattern
+
+    rng = np.random.default_rng(11)
+    n, m = 15, 6
+    A = rng.standard_normal((n, n))
+    P = A @ A.T * 1e-3 + np.eye(n) * 1e-4
+    H = np.zeros((m, n))
+    for a in range(3):
+        H[a, 3 + a] = 1.0
+        H[3 + a, 9 + a] = -1.0
+        H[3 + a, 6:9] = 1e-3 * rng.standard_normal(3)
+    R = np.diag(rng.uniform(1e-6, 1e-4, m))
+    off = np.array([0, 3, 6])
+    nzn, nzc, nzv = np.empty(m, np.int64), np.empty((m, n), np.int64), np.empty((m, n))
+    row_pattern(H, m, n, nzn, nzc, nzv)
+    assert nzn.tolist() == [1, 1, 1, 4, 4, 4]
+    for p in range(m):
+        np.testing.assert_array_equal(nzc[p, :nzn[p]], np.flatnonzero(H[p]))
+        np.testing.assert_array_equal(nzv[p, :nzn[p]], H[p, np.flatnonzero(H[p])])
+    HP1, S1 = np.zeros((m, n)), np.zeros((m, m))
+    HP2, S2 = np.zeros((m, n)), np.zeros((m, m))
+    _innovation_cov_blocks(H, P, R, off, 2, HP1, S1, n)
+    _innovation_cov_blocks(H, P, R, off, 2, HP2, S2, n, nzn, nzc, nzv)
+    np.testing.assert_array_equal(HP1, HP2)
+    np.testing.assert_array_equal(S1, S2)
+    S_ref = H @ P @ H.T + R
+    for o0, o1 in ((0, 3), (3, 6)):
+        np.testing.assert_allclose(S2[o0:o1, o0:o1], S_ref[o0:o1, o0:o1], rtol=1e-12)
+
+
+def test_nis3_is_the_general_nis():
+    """The written-out 3 x 3 NIS of the compiled path gives the general Cholesky NIS bit for
+    bit, and NaN for a block that is not positive definite."""
+    from insgnss.filter.gating import nis3, nis_into
+
+    rng = np.random.default_rng(3)
+    for _ in range(50):
+        A = rng.standard_normal((3, 3))
+        S = np.zeros((5, 5))
+        S[1:4, 1:4] = A @ A.T + np.diag(rng.uniform(1e-6, 1e-2, 3))
+        y = np.zeros(5)
+        y[1:4] = rng.standard_normal(3) * 0.1
+        ref = nis_into(S[1:4, 1:4], y[1:4], np.empty((3, 3)), np.empty(3))
+        assert nis3(S, 1, y) == ref
+        assert abs(ref - y[1:4] @ np.linalg.solve(S[1:4, 1:4], y[1:4])) < 1e-9 * ref
+    S[2, 2] = -1.0
+    assert np.isnan(nis3(S, 1, y))

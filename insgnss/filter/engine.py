@@ -303,7 +303,10 @@ class FilterResult:
         The applied updates: rows ``r0[e] .. r1[e]-1`` of ``H``, ``K`` (transposed), ``G =
         S^-1 H``, ``s = S^-1 z`` belong to node ``e`` (:class:`insgnss.filter.store.NodeStore`);
         the smoother's record, kept only when it runs (``config.smoother``; the compiled
-        high-rate path keeps its rows always).
+        high-rate path keeps its rows always). ``H`` is compact, by its non-zeros: row ``r``
+        has the columns ``H_col[H_ptr[r]:H_ptr[r+1]]`` and values ``H_val[...]``
+        (:func:`insgnss.filter.store.dense_rows` gives dense rows); ``G`` is written only where
+        it is kept (the Python path; the compiled path with ``smoother_covariance``).
     log : dict
         The innovation log as arrays (``time tid lid dof nis threshold accepted recovered innov
         innov_std``, ``names``: the measurement type of each ``tid``, and ``labels``: the row
@@ -714,9 +717,11 @@ def _finish(run: _Run, completed: int, error, t_start: float) -> FilterResult:
     log["names"] = list(run.log.names)
     log["labels"] = list(run.log.labels)
     timing["total"] = perf() - t_start
-    updates = {"r0": store.r0[:n_ok], "r1": store.r1[:n_ok], "H": store.H[:store.n_rows],
-               "K": store.K[:store.n_rows], "G": store.G[:store.n_rows],
-               "s": store.s[:store.n_rows]}
+    nz = int(store.H_ptr[store.n_rows])
+    updates = {"r0": store.r0[:n_ok], "r1": store.r1[:n_ok],
+               "H_ptr": store.H_ptr[:store.n_rows + 1], "H_col": store.H_col[:nz],
+               "H_val": store.H_val[:nz], "K": store.K[:store.n_rows],
+               "G": store.G[:store.n_rows], "s": store.s[:store.n_rows]}
     high_rate = None
     if n_hr:
         high_rate = {"t": store.hr_t[:n_hr], "row": store.hr_row[:n_hr],

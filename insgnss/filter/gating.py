@@ -52,7 +52,7 @@ from numba import njit
 from ..stats import chi2_ppf
 from .linalg import _innovation_cov, cholesky_into
 
-__all__ = ["GateTable", "gate_step", "inflate_for", "nis", "nis_into", "type_lost", "ACCEPT",
+__all__ = ["GateTable", "gate_step", "inflate_for", "nis", "nis3", "nis_into", "type_lost", "ACCEPT",
            "REJECT", "RECOVER"]
 
 REJECT, ACCEPT, RECOVER = 0, 1, 2
@@ -98,6 +98,35 @@ def nis_into(S, y, L, w):
             v -= L[i, q] * w[q]
         w[i] = v / L[i, i]
         out += w[i] * w[i]
+    return out
+
+
+@njit(cache=True)
+def nis3(S, o, y):
+    """:func:`nis_into` of the 3 x 3 block ``S[o:o+3, o:o+3]`` and ``y[o:o+3]`` (a ZUPT or
+    ZARU), written out: the same operations in the same order (the same number), without the
+    loops and views of the general size; NaN if the block is not PD."""
+    v = S[o, o]
+    if not v > 0.0:
+        return np.nan
+    l00 = np.sqrt(v)
+    l10 = S[o + 1, o] / l00
+    v = S[o + 1, o + 1] - l10 * l10
+    if not v > 0.0:
+        return np.nan
+    l11 = np.sqrt(v)
+    l20 = S[o + 2, o] / l00
+    l21 = (S[o + 2, o + 1] - l20 * l10) / l11
+    v = S[o + 2, o + 2] - l20 * l20 - l21 * l21
+    if not v > 0.0:
+        return np.nan
+    l22 = np.sqrt(v)
+    w0 = y[o] / l00
+    out = w0 * w0
+    w1 = (y[o + 1] - l10 * w0) / l11
+    out += w1 * w1
+    w2 = (y[o + 2] - l20 * w0 - l21 * w1) / l22
+    out += w2 * w2
     return out
 
 

@@ -21,7 +21,9 @@ node of the smoother's store (:mod:`.store`):
    of the engine's gate table, gate recovery with :func:`.gating.inflate_for`), checked by the
    runaway-NIS monitor (:func:`.health.runaway_push`) and logged; the accepted ones are
    applied one scalar row at a time when their noise is uncorrelated (diagonal ``R``: ZUPT,
-   ZARU, NHC; :func:`_sequential_update`, rank-one downdates at the non-zeros of ``H``, the
+   ZARU, NHC; :func:`_sequential_rows`, rank-one downdates from the rows of ``P`` at the
+   non-zeros of ``H``, found once per sample (:func:`row_pattern`) for ``H P``, the blocks of
+   ``S`` and the update; the
    smoother's stacked ``K`` and ``S^-1 z`` recovered exactly from ``P(k|k)``; not in a run
    that stores ``S^-1 H`` for smoothed covariances), else
    stacked into one update, ``P <- P - K S K^T`` as a symmetric rank-m downdate through the
@@ -29,8 +31,9 @@ node of the smoother's store (:mod:`.store`):
    cost; :func:`_kalman_update`);
 3. *feedback*: the error estimate is fed back into the nominal (:func:`.kernels.apply_feedback`)
    and reset;
-4. *store*: the node (``Phi``, ``P(k|k-1)``, ``P(k|k)``, feedback, the update's ``H, K,
-   S^-1 H, S^-1 z``, the nominal parameters) and the IMU-rate nominal row.
+4. *store*: the node (``Phi``, ``P(k|k-1)``, ``P(k|k)``, feedback, the update's ``H`` by its
+   non-zeros (the row pattern), ``K, S^-1 H, S^-1 z``, the nominal parameters) and the
+   IMU-rate nominal row.
 
 A non-finite or non-positive-definite covariance or a runaway NIS stops the segment with a
 status code; the engine turns it into :class:`insgnss.errors.FilterHealthError` and keeps the
@@ -54,7 +57,7 @@ from ..mechanization.strapdown import STEP_WORK_SHAPE
 from . import gating, health
 from .kernels import _euler_std, apply_feedback_into, interval_step, store_nav
 from .linalg import _innovation_cov, cholesky_into, hp_rows, s_block, tri_solve
-from .measurements import Measurement, evaluate_compiled
+from .measurements import ZARU, ZUPT, Measurement, evaluate_compiled
 
 __all__ = ["HighRate", "dense_segment"]
 
@@ -222,51 +225,104 @@ def _kalman_update(P, H, z, m, HP, S, x, Kt, G, s, L, W, V, want_G, n=-1):
 
 
 @njit(cache=True)
-def _innovation_cov_blocks(H, P, R, off, nm, HP, S, n):
+def row_pattern(H, m, n, nzn, nzc, nzv):
+    """The non-zeros of the first ``m`` rows of ``H``: row ``p`` has ``nzn[p]`` of them, at the
+    columns ``nzc[p, :nzn[p]]`` (increasing) with the values ``nzv[p, :nzn[p]]`` (a ZUPT row
+    selects one velocity state, a ZARU row a gyro bias and the three attitude states). The
+    high-rate path forms ``H P``, the blocks of ``S`` and the row-by-row update from it instead
+    of reading the dense rows again."""
+    for p in range(m):
+        nz = 0
+        for c in range(n):
+            h = H[p, c]
+            if h != 0.0:
+                nzc[p, nz] = c
+                nzv[p, nz] = h
+                nz += 1
+        nzn[p] = nz
+
+
+@njit(cache=True)
+def _hp_sparse(P, m, nzn, nzc, nzv, HP, n):
+    """``HP = H P`` for the first ``m`` rows of ``H`` given by their non-zeros
+    (:func:`row_pattern`): the same sums, in the same order, as :func:`.linalg.hp_rows`."""
+    for a in range(m):
+        for j in range(n):
+            HP[a, j] = 0.0
+        for q in range(nzn[a]):
+            c = nzc[a, q]
+            h = nzv[a, q]
+            for j in range(n):
+                HP[a, j] += h * P[c, j]
+
+
+@njit(cache=True)
+def _innovation_cov_blocks(H, P, R, off, nm, HP, S, n, nzn=None, nzc=None, nzv=None):
     """``HP = H P`` for the rows ``0 .. off[nm]-1`` and the diagonal blocks
     ``S[o0:o1, o0:o1] = H P H^T + R`` of the measurements ``k < nm`` (rows ``off[k] ..
     off[k+1]-1``): what gating and the innovation log read when the measurements are applied
-    one row at a time (:func:`_sequential_update`); the zeros of ``H`` are skipped."""
-    hp_rows(H, P, off[nm], HP, n)
+    one row at a time (:func:`_sequential_update`); the zeros of ``H`` are skipped (read from
+    the row pattern ``nzn, nzc, nzv`` of :func:`row_pattern` when given)."""
+    if nzn is None:
+        hp_rows(H, P, off[nm], HP, n)
+        for k in range(nm):
+            s_block(H, R, HP, off[k], off[k + 1], S, n)
+        return
+    _hp_sparse(P, off[nm], nzn, nzc, nzv, HP, n)
     for k in range(nm):
-        s_block(H, R, HP, off[k], off[k + 1], S, n)
+        for a in range(off[k], off[k + 1]):
+            for b in range(off[k], a + 1):
+                v = R[a, b]
+                for q in range(nzn[b]):
+                    v += HP[a, nzc[b, q]] * nzv[b, q]
+                S[a, b] = v
+                S[b, a] = v
 
 
 @njit(cache=True)
 def _sequential_update(P, H, z, rd, m, x, Kt, s, u, k, nzc, nzv, n):
     """Kalman update with the first ``m`` rows of ``H``, ``z`` applied one scalar row at a
-    time, for mutually uncorrelated rows (``R = diag(rd)``, ``rd > 0``).
+    time, for mutually uncorrelated rows (``R = diag(rd)``, ``rd > 0``): :func:`_sequential_rows`
+    on the row pattern of ``H`` (:func:`row_pattern`; ``nzc``, ``nzv``: scratch of at least
+    ``n`` entries, unused)."""
+    nzn = np.empty(m, np.int64)
+    pc = np.empty((m, n), np.int64)
+    pv = np.empty((m, n))
+    row_pattern(H, m, n, nzn, pc, pv)
+    return _sequential_rows(P, z, rd, m, x, Kt, s, u, k, nzn, pc, pv, n)
+
+
+@njit(cache=True)
+def _sequential_rows(P, z, rd, m, x, Kt, s, u, k, nzn, nzc, nzv, n):
+    """Kalman update with ``m`` rows given by their non-zeros (:func:`row_pattern`) and ``z``
+    applied one scalar row at a time, for mutually uncorrelated rows (``R = diag(rd)``,
+    ``rd > 0``).
 
     Row ``p`` (``h = H[p]``, prior ``x``, ``P``): ``u = P h^T``, ``s_p = h u + r_p``,
     ``x += u (z_p - h x) / s_p``, ``P -= u u^T / s_p``. For uncorrelated rows this is the
     stacked update (Maybeck 1979, sec. 7.4; Bierman 1977, ch. II) without the Cholesky factor
-    of the stacked ``S``: ``u`` is read at the non-zeros of ``h`` (a ZUPT row selects one
-    velocity state, a ZARU row a gyro bias and the attitude), the rank-one downdates touch the
-    upper triangle only and ``P`` is mirrored at the end.
+    of the stacked ``S``: ``u`` is the combination of the rows of ``P`` at the non-zeros of
+    ``h`` (a ZUPT row selects one velocity state, a ZARU row a gyro bias and the attitude),
+    read from the upper triangle; the rank-one downdates touch the upper triangle only and
+    ``P`` is mirrored at the end.
 
     The smoother's quantities of the stacked update follow from ``P(k|k)`` and ``x`` exactly
     (``K = P(k|k) H^T R^-1``; the Woodbury form of ``S^-1`` gives ``S^-1 z = R^-1 (z - H x)``):
     the transposed gain ``Kt`` and ``s = S^-1 z``, the arrays :func:`_kalman_update` gives, so
     the store and the backward pass are those of the stacked update. (``S^-1 H = R^-1 (H - H K
     H)`` would lose digits to cancellation when ``H P H^T >> R``: a run that stores it, for the
-    smoothed covariances, takes the stacked update.) ``u``, ``k``, ``nzv``: scratch (n,),
-    ``nzc``: int scratch (n,). Returns False (``P`` partly updated) if a row's ``s_p`` is not
-    positive.
+    smoothed covariances, takes the stacked update.) ``u``, ``k``: scratch (n,). Returns False
+    (``P`` partly updated) if a row's ``s_p`` is not positive.
     """
     for i in range(n):
         x[i] = 0.0
     for p in range(m):
-        nz = 0
-        for c in range(n):
-            if H[p, c] != 0.0:
-                nzc[nz] = c
-                nzv[nz] = H[p, c]
-                nz += 1
+        nz = nzn[p]
         for j in range(n):
             u[j] = 0.0
         for q in range(nz):  # u = P h^T from the upper triangle
-            c = nzc[q]
-            hc = nzv[q]
+            c = nzc[p, q]
+            hc = nzv[p, q]
             for j in range(c):
                 u[j] += hc * P[j, c]
             for j in range(c, n):
@@ -274,8 +330,8 @@ def _sequential_update(P, H, z, rd, m, x, Kt, s, u, k, nzc, nzv, n):
         sp = rd[p]
         nu = z[p]
         for q in range(nz):
-            sp += nzv[q] * u[nzc[q]]
-            nu -= nzv[q] * x[nzc[q]]
+            sp += nzv[p, q] * u[nzc[p, q]]
+            nu -= nzv[p, q] * x[nzc[p, q]]
         if not sp > 0.0:
             return False
         isp = 1.0 / sp
@@ -295,12 +351,12 @@ def _sequential_update(P, H, z, rd, m, x, Kt, s, u, k, nzc, nzv, n):
         for j in range(n):
             Kt[p, j] = 0.0
         hx = 0.0
-        for c in range(n):
-            hc = H[p, c]
-            if hc != 0.0:
-                hx += hc * x[c]
-                for j in range(n):
-                    Kt[p, j] += hc * P[c, j]
+        for q in range(nzn[p]):
+            c = nzc[p, q]
+            hc = nzv[p, q]
+            hx += hc * x[c]
+            for j in range(n):
+                Kt[p, j] += hc * P[c, j]
         for j in range(n):
             Kt[p, j] *= ri
         s[p] = (z[p] - hx) * ri
@@ -326,14 +382,16 @@ def _store_std_row(table, j, P, C, J, es, n):
 def dense_segment(model, dynamics, t, dth, dv, pos, vel, C, pnom, i_sg, i_sa, gmodel, aupd, q_g,
                   q_a, dyn, decay, qdiag, Fx, Qx, table, seg, post, rates, f_ptr, f_col, f_act,
                   q_row, q_col, j, frac, t_end, P, hr0, hr_t, hr_row, hr_F, hr_Q, hr_fb, hr_r0,
-                  hr_r1, hr_ppi, pp_out, Hs, Ks, Gs, ss, row, store_G, hr_ptr, hr_m, hr_r, kinds,
-                  ips, fps, vptr, vals, stds, tids, thrs, gyro_psd, streak, recovery, n_nav, check,
+                  hr_r1, hr_ppi, pp_out, H_ptr, H_col, H_val, Ks, Gs, ss, row, store_G, hr_ptr,
+                  hr_m, hr_r, kinds, ips, fps, vptr, vals, stds, tids, thrs, gyro_psd, streak,
+                  recovery, n_nav, check,
                   rw_on, rw_t, rw_v, rw_state, rw_scratch, rw_window, rw_min, rw_bound, lg_t,
                   lg_tid, lg_dof, lg_nis, lg_thr, lg_flags, lg_z, lg_s, status):
     """Run the IMU rows ``j ..`` with ``t[j] <= t_end`` of a dense segment (module docstring):
     one high-rate sample per row, written at ``hr0, hr0 + 1, ...`` of the high-rate arrays of
-    the store (:class:`insgnss.filter.store.NodeStore`); update rows from ``row`` (``G`` only
-    if ``store_G``); log records from 0; the forward table rows complete (nominal, stds,
+    the store (:class:`insgnss.filter.store.NodeStore`); update rows from ``row`` (``H`` by its
+    non-zeros into ``H_ptr, H_col, H_val`` from ``H_ptr[row]``, ``G`` only if ``store_G``); log
+    records from 0; the forward table rows complete (nominal, stds,
     parameters).
 
     ``status`` (int64[4]) receives (code, samples written, update rows written, log records);
@@ -382,8 +440,9 @@ def dense_segment(model, dynamics, t, dth, dv, pos, vel, C, pnom, i_sg, i_sa, gm
     rd = np.empty(mmax)
     u_s = np.empty(n)
     k_s = np.empty(n)
-    nz_c = np.empty(n, np.int64)
-    nz_v = np.empty(n)
+    nz_n = np.zeros(mmax, np.int64)  # row pattern of Hk (row_pattern)
+    nz_c = np.zeros((mmax, n), np.int64)
+    nz_v = np.zeros((mmax, n))
     Ln = np.empty((3, 3))
     wn = np.empty(3)
     fb_work = np.empty((3, 3, 3))
@@ -502,10 +561,11 @@ def dense_segment(model, dynamics, t, dth, dv, pos, vel, C, pnom, i_sg, i_sa, gm
                         seq = False
         if nm:
             if seq:
+                row_pattern(Hk, m_tot, n, nz_n, nz_c, nz_v)
                 if n == 15:
-                    _innovation_cov_blocks(Hk, P, Rk, off, nm, HP, S, 15)
+                    _innovation_cov_blocks(Hk, P, Rk, off, nm, HP, S, 15, nz_n, nz_c, nz_v)
                 else:
-                    _innovation_cov_blocks(Hk, P, Rk, off, nm, HP, S, n)
+                    _innovation_cov_blocks(Hk, P, Rk, off, nm, HP, S, n, nz_n, nz_c, nz_v)
             elif n == 15:
                 _innovation_cov(Hk, P, Rk, m_tot, HP, S, 15)
             else:
@@ -517,7 +577,10 @@ def dense_segment(model, dynamics, t, dth, dv, pos, vel, C, pnom, i_sg, i_sa, gm
             d = o1 - o0
             mi = hr_m[mk[k]]
             zd = zk[o0:o1]
-            nis = gating.nis_into(S[o0:o1, o0:o1], zd, Ln, wn)
+            if d == 3:
+                nis = gating.nis3(S, o0, zk)
+            else:
+                nis = gating.nis_into(S[o0:o1, o0:o1], zd, Ln, wn)
             tid = tids[mi]
             if rw_on:
                 med = health.runaway_push(rw_t, rw_v, rw_state, tid, t[j], nis / d, rw_window,
@@ -532,7 +595,7 @@ def dense_segment(model, dynamics, t, dth, dv, pos, vel, C, pnom, i_sg, i_sa, gm
                 health.runaway_restart(rw_state)
                 gating.inflate_for(P, Hk[o0:o1], Rk[o0:o1, o0:o1], zd, thr, n_nav)
                 if seq:  # the others see the inflated P
-                    _innovation_cov_blocks(Hk, P, Rk, off, nm, HP, S, n)
+                    _innovation_cov_blocks(Hk, P, Rk, off, nm, HP, S, n, nz_n, nz_c, nz_v)
                 else:
                     _innovation_cov(Hk, P, Rk, m_tot, HP, S, n)
                 nis = gating.nis_into(S[o0:o1, o0:o1], zd, Ln, wn)
@@ -582,12 +645,14 @@ def dense_segment(model, dynamics, t, dth, dv, pos, vel, C, pnom, i_sg, i_sa, gm
         # --- 3. stacked update and feedback
         hr_r0[h] = r
         if m_acc > 0:
+            if seq and m_acc < m_tot:
+                row_pattern(Hk, m_acc, n, nz_n, nz_c, nz_v)
             if seq and n == 15:  # the constant dimension lets LLVM unroll the loops
-                ok = _sequential_update(P, Hk, zk, rd, m_acc, x, Kt, sv, u_s, k_s, nz_c, nz_v,
-                                        15)
+                ok = _sequential_rows(P, zk, rd, m_acc, x, Kt, sv, u_s, k_s, nz_n, nz_c, nz_v,
+                                      15)
             elif seq:
-                ok = _sequential_update(P, Hk, zk, rd, m_acc, x, Kt, sv, u_s, k_s, nz_c, nz_v,
-                                        n)
+                ok = _sequential_rows(P, zk, rd, m_acc, x, Kt, sv, u_s, k_s, nz_n, nz_c, nz_v,
+                                      n)
             elif n == 15:
                 ok = _kalman_update(P, Hk, zk, m_acc, HP, S, x, Kt, G, sv, L, W, V, store_G, 15)
             else:
@@ -600,9 +665,16 @@ def dense_segment(model, dynamics, t, dth, dv, pos, vel, C, pnom, i_sg, i_sa, gm
                 code = NOT_PD
                 fail_t = t[j]
                 break
-            for p in range(m_acc):
+            if not seq:
+                row_pattern(Hk, m_acc, n, nz_n, nz_c, nz_v)
+            nzp = H_ptr[r]
+            for p in range(m_acc):  # H by its non-zeros, K^T (and S^-1 H) dense
+                for q in range(nz_n[p]):
+                    H_col[nzp] = nz_c[p, q]
+                    H_val[nzp] = nz_v[p, q]
+                    nzp += 1
+                H_ptr[r + 1] = nzp
                 for c in range(n):
-                    Hs[r, c] = Hk[p, c]
                     Ks[r, c] = Kt[p, c]
                     if store_G:
                         Gs[r, c] = G[p, c]
@@ -676,6 +748,12 @@ class HighRate:
         self.thrs = np.array([run.gates.threshold(run.gates.probability(m), d)
                               for m, d in zip(measurements, dofs, strict=True)], float)
         self.gyro_psd = np.asarray(model.noise.gyro_psd, float)
+        # most non-zeros of H an event of each measurement stores: a ZUPT row selects one
+        # velocity state, a ZARU row a gyro bias and the three attitude states; a body-velocity
+        # row may touch every state
+        n = layout.n
+        self.nz_bound = np.array([3 if s.kind == ZUPT else 12 if s.kind == ZARU else 3 * n
+                                  for s in specs], np.int64)
         self.pattern = model.f_pattern()
 
     def segment(self, t_end: float, P: np.ndarray) -> np.ndarray:
@@ -687,7 +765,8 @@ class HighRate:
         j0 = model.j
         j1 = int(np.searchsorted(t, t_end, side="right"))
         n_ev = int(sched.hr_ptr[j1] - sched.hr_ptr[j0])
-        store.reserve_rows(3 * n_ev)
+        store.reserve_rows(3 * n_ev, int(self.nz_bound[sched.hr_m[sched.hr_ptr[j0]:
+                                                                  sched.hr_ptr[j1]]].sum()))
         lg = {"time": np.empty(n_ev), "tid": np.empty(n_ev, np.int64),
               "dof": np.empty(n_ev, np.int64), "nis": np.empty(n_ev),
               "threshold": np.empty(n_ev), "flags": np.zeros((n_ev, 2), np.bool_),
@@ -703,7 +782,8 @@ class HighRate:
             j, frac, fail_t, fail_v, fail_tid = dense_segment(
                 *model.high_rate_args(), *self.pattern, model.j, model.frac, t_end, P, h0,
                 store.hr_t, store.hr_row, store.hr_F, store.hr_Q, store.hr_fb, store.hr_r0,
-                store.hr_r1, store.hr_ppi, pp_out, store.H, store.K, store.G, store.s,
+                store.hr_r1, store.hr_ppi, pp_out, store.H_ptr, store.H_col, store.H_val,
+                store.K, store.G, store.s,
                 store.n_rows, bool(run.config.smoother_covariance),
                 sched.hr_ptr, sched.hr_m, sched.hr_r, self.kinds, self.ips, self.fps, self.vptr,
                 self.vals, self.stds, self.tids, self.thrs, self.gyro_psd,

@@ -63,9 +63,12 @@ __all__ = ["mbf_backward", "rts_error_state", "smooth"]
 
 
 @njit(cache=True)
-def _through_update(lam, lt, Lam, Lt, H, K, G, s, r0, r1, covariance, KL, W, n=-1):
+def _through_update(lam, lt, Lam, Lt, H_ptr, H_col, H_val, K, G, s, r0, r1, covariance, KL, W,
+                    Hd, n=-1):
     """``lambda~ = lambda^ - H^T (S^-1 z + K^T lambda^)`` and (``covariance``)
-    ``Lambda~ = H^T S^-1 H + (I - K H)^T Lambda^ (I - K H)`` for the update rows r0 .. r1-1."""
+    ``Lambda~ = H^T S^-1 H + (I - K H)^T Lambda^ (I - K H)`` for the update rows r0 .. r1-1
+    (``H`` by its non-zeros, :mod:`.store`: ``H^T c`` touches only them; the covariance
+    recursion expands the rows into the scratch ``Hd`` (m, n))."""
     if n < 0:
         n = lam.shape[0]
     m = r1 - r0
@@ -75,8 +78,8 @@ def _through_update(lam, lt, Lam, Lt, H, K, G, s, r0, r1, covariance, KL, W, n=-
         c = s[r]
         for i in range(n):
             c += K[r, i] * lam[i]
-        for i in range(n):
-            lt[i] -= H[r, i] * c
+        for q in range(H_ptr[r], H_ptr[r + 1]):
+            lt[H_col[q]] -= H_val[q] * c
     if not covariance:
         return
     for i in range(n):
@@ -84,6 +87,11 @@ def _through_update(lam, lt, Lam, Lt, H, K, G, s, r0, r1, covariance, KL, W, n=-
             Lt[i, j] = Lam[i, j]
     if m == 0:
         return
+    for a in range(m):
+        for j in range(n):
+            Hd[a, j] = 0.0
+        for q in range(H_ptr[r0 + a], H_ptr[r0 + a + 1]):
+            Hd[a, H_col[q]] = H_val[q]
     # M^T Lam M = Lam - H^T (K^T Lam) - (K^T Lam)^T H + H^T (K^T Lam K) H
     for a in range(m):
         for j in range(n):
@@ -98,7 +106,7 @@ def _through_update(lam, lt, Lam, Lt, H, K, G, s, r0, r1, covariance, KL, W, n=-
                 v += KL[a, j] * K[r0 + b, j]
             W[a, b] = v
     for a in range(m):
-        ha = H[r0 + a]
+        ha = Hd[a]
         ga = G[r0 + a]
         ka = KL[a]
         for i in range(n):
@@ -106,7 +114,7 @@ def _through_update(lam, lt, Lam, Lt, H, K, G, s, r0, r1, covariance, KL, W, n=-
             for j in range(n):
                 v = hi * (ga[j] - ka[j]) - ka[i] * ha[j]
                 for b in range(m):
-                    v += hi * W[a, b] * H[r0 + b, j]
+                    v += hi * W[a, b] * Hd[b, j]
                 Lt[i, j] += v
 
 
@@ -154,12 +162,13 @@ def _back_through_dense(lam, lt, Lam, Lt, F, covariance, T1):
 
 
 @njit(cache=True)
-def _hr_backward(h0, h1, lam, lt, Lam, Lt, H, K, G, s, hr_r0, hr_r1, hr_F, f_ptr, f_col, f_act,
-                 covariance, KL, W, T1, LT, n):
+def _hr_backward(h0, h1, lam, lt, Lam, Lt, H_ptr, H_col, H_val, K, G, s, hr_r0, hr_r1, hr_F,
+                 f_ptr, f_col, f_act, covariance, KL, W, Hd, T1, LT, n):
     """The adjoint back through the high-rate samples ``h1-1 .. h0``; ``LT[h - h0]`` keeps
     each ``lambda~``."""
     for h in range(h1 - 1, h0 - 1, -1):
-        _through_update(lam, lt, Lam, Lt, H, K, G, s, hr_r0[h], hr_r1[h], covariance, KL, W, n)
+        _through_update(lam, lt, Lam, Lt, H_ptr, H_col, H_val, K, G, s, hr_r0[h], hr_r1[h],
+                        covariance, KL, W, Hd, n)
         for i in range(n):
             LT[h - h0, i] = lt[i]
         _back_through_sparse(lam, lt, Lam, Lt, hr_F[h], f_ptr, f_col, f_act, covariance, T1, n)
@@ -194,20 +203,20 @@ def _hr_forward(x, h0, h1, hr_F, hr_Q, hr_fb, hr_ppi, hr_Pp, LT, f_ptr, f_col, f
 
 
 @njit(cache=True)
-def _mbf_backward15(Pf, Phi, fb, r0, r1, H, K, G, s, n_nodes, seg0, seg1, n_hr, hr_F, hr_Q,
-                    hr_fb, hr_r0, hr_r1, hr_ppi, hr_Pp, f_ptr, f_col, f_act, q_row, q_col,
+def _mbf_backward15(Pf, Phi, fb, r0, r1, H_ptr, H_col, H_val, K, G, s, n_nodes, seg0, seg1,
+                    n_hr, hr_F, hr_Q, hr_fb, hr_r0, hr_r1, hr_ppi, hr_Pp, f_ptr, f_col, f_act, q_row, q_col,
                     covariance, xs_plus, xs_minus, Ps, xs_hr):
     """:func:`mbf_backward` of the 15-state model with the dimension a compile-time constant,
     so that LLVM unrolls the per-sample loops (a separate entry point: a job compiles only the
     specialisation it runs, :func:`smooth` picks it)."""
-    mbf_backward(Pf, Phi, fb, r0, r1, H, K, G, s, n_nodes, seg0, seg1, n_hr, hr_F, hr_Q, hr_fb,
-                 hr_r0, hr_r1, hr_ppi, hr_Pp, f_ptr, f_col, f_act, q_row, q_col, covariance,
-                 xs_plus, xs_minus, Ps, xs_hr, 15)
+    mbf_backward(Pf, Phi, fb, r0, r1, H_ptr, H_col, H_val, K, G, s, n_nodes, seg0, seg1, n_hr,
+                 hr_F, hr_Q, hr_fb, hr_r0, hr_r1, hr_ppi, hr_Pp, f_ptr, f_col, f_act, q_row,
+                 q_col, covariance, xs_plus, xs_minus, Ps, xs_hr, 15)
 
 
 @njit(cache=True)
-def mbf_backward(Pf, Phi, fb, r0, r1, H, K, G, s, n_nodes, seg0, seg1, n_hr, hr_F, hr_Q,
-                 hr_fb, hr_r0, hr_r1, hr_ppi, hr_Pp, f_ptr, f_col, f_act, q_row, q_col,
+def mbf_backward(Pf, Phi, fb, r0, r1, H_ptr, H_col, H_val, K, G, s, n_nodes, seg0, seg1, n_hr,
+                 hr_F, hr_Q, hr_fb, hr_r0, hr_r1, hr_ppi, hr_Pp, f_ptr, f_col, f_act, q_row, q_col,
                  covariance, xs_plus, xs_minus, Ps, xs_hr, n):
     """Modified Bryson-Frazier backward pass (module docstring) over the nodes
     ``0 .. n_nodes-1`` and the high-rate samples ``0 .. n_hr-1`` of a
@@ -235,6 +244,7 @@ def mbf_backward(Pf, Phi, fb, r0, r1, H, K, G, s, n_nodes, seg0, seg1, n_hr, hr_
         m_max = max(m_max, hr_r1[h] - hr_r0[h])
     KL = np.empty((m_max, n))
     W = np.empty((m_max, m_max))
+    Hd = np.empty((m_max, n))
     seg_max = 1
     for k in range(n_nodes):
         seg_max = max(seg_max, seg1[k] - seg0[k])
@@ -247,8 +257,8 @@ def mbf_backward(Pf, Phi, fb, r0, r1, H, K, G, s, n_nodes, seg0, seg1, n_hr, hr_
 
     # trailing high-rate samples after the last node (a stopped run): lambda^ = 0 at the end
     if n_hr > tail0:
-        _hr_backward(tail0, n_hr, lam, lt, Lam, Lt, H, K, G, s, hr_r0, hr_r1, hr_F, f_ptr,
-                     f_col, f_act, covariance, KL, W, T1, LT, n)
+        _hr_backward(tail0, n_hr, lam, lt, Lam, Lt, H_ptr, H_col, H_val, K, G, s, hr_r0,
+                     hr_r1, hr_F, f_ptr, f_col, f_act, covariance, KL, W, Hd, T1, LT, n)
         pend0, pend1 = tail0, n_hr
     for k in range(n_nodes - 1, -1, -1):
         P = Pf[k]
@@ -269,12 +279,14 @@ def mbf_backward(Pf, Phi, fb, r0, r1, H, K, G, s, n_nodes, seg0, seg1, n_hr, hr_
             _hr_forward(x, pend0, pend1, hr_F, hr_Q, hr_fb, hr_ppi, hr_Pp, LT, f_ptr,
                         f_col, f_act, q_row, q_col, xs_hr, xm, n)
             pend0, pend1 = 0, 0
-        _through_update(lam, lt, Lam, Lt, H, K, G, s, r0[k], r1[k], covariance, KL, W, n)
+        _through_update(lam, lt, Lam, Lt, H_ptr, H_col, H_val, K, G, s, r0[k], r1[k],
+                        covariance, KL, W, Hd, n)
         if k > 0:
             _back_through_dense(lam, lt, Lam, Lt, Phi[k], covariance, T1)
             if seg1[k] > seg0[k]:  # the high-rate samples between node k-1 and k
-                _hr_backward(seg0[k], seg1[k], lam, lt, Lam, Lt, H, K, G, s, hr_r0, hr_r1,
-                             hr_F, f_ptr, f_col, f_act, covariance, KL, W, T1, LT, n)
+                _hr_backward(seg0[k], seg1[k], lam, lt, Lam, Lt, H_ptr, H_col, H_val, K, G, s,
+                             hr_r0, hr_r1, hr_F, f_ptr, f_col, f_act, covariance, KL, W, Hd,
+                             T1, LT, n)
                 pend0, pend1 = seg0[k], seg1[k]
 
 
@@ -292,10 +304,10 @@ def smooth(store, n_nodes: int, covariance: bool = True, pattern=None):
     if pattern is None:
         e = np.zeros(0, np.int64)
         pattern = (np.zeros(1, np.int64), e, e, e, e)
-    args = (store.Pf, store.Phi, store.fb, store.r0, store.r1, store.H, store.K, store.G,
-            store.s, n_nodes, store.seg0, store.seg1, n_hr, store.hr_F, store.hr_Q, store.hr_fb,
-            store.hr_r0, store.hr_r1, store.hr_ppi, store.hr_Pp, *pattern, bool(covariance),
-            xs_plus, xs_minus, Ps, xs_hr)
+    args = (store.Pf, store.Phi, store.fb, store.r0, store.r1, store.H_ptr, store.H_col,
+            store.H_val, store.K, store.G, store.s, n_nodes, store.seg0, store.seg1, n_hr,
+            store.hr_F, store.hr_Q, store.hr_fb, store.hr_r0, store.hr_r1, store.hr_ppi,
+            store.hr_Pp, *pattern, bool(covariance), xs_plus, xs_minus, Ps, xs_hr)
     if n == 15:
         _mbf_backward15(*args)
     else:

@@ -23,6 +23,13 @@ update applied there: ``H`` (m, n), the gain ``K`` stored transposed (m, n), ``G
 Rauch-Tung-Striebel form, the modified Bryson-Frazier form (:mod:`.smoother`) and an EM
 estimate of the noise parameters need (``R = S - H Pp H^T``).
 
+``H`` is kept compact, by its non-zeros (a ZUPT row selects one velocity state, a ZARU row a
+gyro bias and the three attitude states, a GNSS position row three position states): row
+``r`` has the columns ``H_col[H_ptr[r]:H_ptr[r+1]]`` (increasing) and the values
+``H_val[H_ptr[r]:H_ptr[r+1]]``; :func:`dense_rows` gives the rows as a dense (m, n) array.
+``K``, ``G`` and ``s`` are dense (``G`` is written only by updates that keep it: the Python
+path, and the compiled path when the smoothed covariances are run).
+
 High-rate samples
 -----------------
 In a segment run by the compiled high-rate path (:mod:`.highrate`) every IMU sample is a
@@ -48,7 +55,19 @@ from __future__ import annotations
 import numpy as np
 import pandas as pd
 
-__all__ = ["NodeStore", "InnovationLog", "Table", "innovation_tables", "select_rows", "solution_table"]
+__all__ = ["NodeStore", "InnovationLog", "Table", "dense_rows", "innovation_tables",
+           "select_rows", "solution_table"]
+
+
+def dense_rows(H_ptr, H_col, H_val, r0: int, r1: int, n: int) -> np.ndarray:
+    """The update rows ``r0 .. r1-1`` of a compact ``H`` (module docstring, "Updates") as a
+    dense (r1 - r0, n) array; ``FilterResult.updates`` holds ``H_ptr``, ``H_col``, ``H_val``:
+    ``dense_rows(u["H_ptr"], u["H_col"], u["H_val"], r0, r1, n)``."""
+    out = np.zeros((r1 - r0, n))
+    for r in range(r0, r1):
+        a, b = int(H_ptr[r]), int(H_ptr[r + 1])
+        out[r - r0, H_col[a:b]] = H_val[a:b]
+    return out
 
 
 class NodeStore:
@@ -89,22 +108,43 @@ class NodeStore:
         self._alloc_rows(max(rows, 8))
         self.n_rows = 0
 
-    def _alloc_rows(self, cap):
+    def _alloc_rows(self, cap, cap_nz=None):
+        """Room for ``cap`` update rows and ``cap_nz`` non-zeros of ``H`` (default: the present
+        room for them, at least 8 per row)."""
         n = self.n
-        old = getattr(self, "H", None)
+        old = getattr(self, "K", None)
+        if cap_nz is None:
+            cap_nz = max(8 * cap, self.H_col.shape[0] if old is not None else 0)
         alloc = self._allocate
-        H, K, G, s = (alloc((cap, n), float), alloc((cap, n), float), alloc((cap, n), float),
-                      alloc((cap,), float))
+        K, G, s = alloc((cap, n), float), alloc((cap, n), float), alloc((cap,), float)
+        H_ptr = np.zeros(cap + 1, np.int64)
         if old is not None:
             r = self.n_rows
-            H[:r], K[:r], G[:r], s[:r] = self.H[:r], self.K[:r], self.G[:r], self.s[:r]
-        self.H, self.K, self.G, self.s = H, K, G, s
+            K[:r], G[:r], s[:r] = self.K[:r], self.G[:r], self.s[:r]
+            H_ptr[:r + 1] = self.H_ptr[:r + 1]
+        self.K, self.G, self.s, self.H_ptr = K, G, s, H_ptr
+        self._alloc_nz(cap_nz)
 
-    def reserve_rows(self, extra: int) -> None:
-        """Make room for ``extra`` more update rows."""
+    def _alloc_nz(self, cap_nz):
+        """Room for ``cap_nz`` non-zeros of ``H`` (columns int32, values float)."""
+        old = getattr(self, "H_col", None)
+        alloc = self._allocate
+        H_col, H_val = alloc((cap_nz,), np.int32), alloc((cap_nz,), float)
+        if old is not None:
+            nz = int(self.H_ptr[self.n_rows])
+            H_col[:nz], H_val[:nz] = self.H_col[:nz], self.H_val[:nz]
+        self.H_col, self.H_val = H_col, H_val
+
+    def reserve_rows(self, extra: int, extra_nz: int | None = None) -> None:
+        """Make room for ``extra`` more update rows with ``extra_nz`` non-zeros of ``H`` in all
+        (default: every row full, ``extra * n``)."""
         need = self.n_rows + extra
-        if need > self.H.shape[0]:
-            self._alloc_rows(max(need, self.H.shape[0] + self.H.shape[0] // 2))
+        if need > self.K.shape[0]:
+            self._alloc_rows(max(need, self.K.shape[0] + self.K.shape[0] // 2))
+        need_nz = int(self.H_ptr[self.n_rows]) + (extra * self.n if extra_nz is None
+                                                  else extra_nz)
+        if need_nz > self.H_col.shape[0]:
+            self._alloc_nz(max(need_nz, self.H_col.shape[0] + self.H_col.shape[0] // 2))
 
     def add_hr_predicted(self, h: int, Pp) -> None:
         """Keep ``P(i|i-1)`` of high-rate sample ``h`` (inflated by a gate recovery)."""
@@ -118,9 +158,16 @@ class NodeStore:
     def add_update(self, H, K, G, s) -> None:
         """Append the rows of one (stacked) update to the node being written."""
         m = H.shape[0]
-        self.reserve_rows(m)
+        H = np.asarray(H, float)
+        self.reserve_rows(m, int(np.count_nonzero(H)))
         r = self.n_rows
-        self.H[r:r + m] = H
+        nz = int(self.H_ptr[r])
+        for a in range(m):
+            cols = np.flatnonzero(H[a])
+            self.H_col[nz:nz + cols.size] = cols
+            self.H_val[nz:nz + cols.size] = H[a, cols]
+            nz += cols.size
+            self.H_ptr[r + a + 1] = nz
         self.K[r:r + m] = K.T
         self.G[r:r + m] = G
         self.s[r:r + m] = s
