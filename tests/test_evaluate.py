@@ -86,3 +86,29 @@ def test_outage_end_consistency_against_the_filter_sigma():
     assert list(table["end_within_3sigma"]) == [False, True]
     assert summary["end_within_3sigma_fraction"] == pytest.approx(0.5)
     assert summary["end_h_err_sigma_ratio_max"] == pytest.approx(3.0)
+
+
+def test_stored_errors_keep_the_output_rate_epochs_and_the_aiding_epochs():
+    """A 200 Hz error table is kept at the 10 Hz output epochs plus the samples around each
+    GNSS epoch (not on the 10 Hz grid), the rows the report and the files have."""
+    from types import SimpleNamespace
+
+    from insgnss.job.evaluation import stored_errors
+
+    t = 100.0 + np.arange(2000) / 200.0  # 10 s at 200 Hz
+    err = pd.DataFrame({"east": np.sin(t), "north": np.cos(t), "up": t * 0.0}, index=t)
+    err["horizontal"] = np.hypot(err["east"], err["north"])
+    tg = np.array([101.2525, 105.5125])  # GNSS epochs between IMU samples and off the grid
+    inputs = SimpleNamespace(gnss=pd.DataFrame(index=tg), control_points=None)
+    job = {"outputs": {"rate_hz": "auto"}, "process": {"preset": "standard"}}
+    kept = stored_errors(err, inputs, job)
+    tk = kept.index.to_numpy(float)
+    grid = np.round(np.arange(100.0, 110.0, 0.1), 6)
+    assert np.isin(grid, np.round(tk, 6)).all()  # every 10 Hz epoch
+    for x in tg:  # the samples either side of each GNSS epoch
+        assert np.isin([t[t < x][-1], t[t > x][0]], tk).all()
+    assert len(kept) == len(grid) + 2 * len(tg) + 1  # and the last sample
+    assert np.array_equal(kept.to_numpy(), err.loc[tk].to_numpy())  # rows, not resampled
+    every = stored_errors(err, inputs, {"outputs": {"rate_hz": "imu"},
+                                        "process": {"preset": "standard"}})
+    assert len(every) == len(err)

@@ -29,7 +29,9 @@ from .result import JobResult
 
 def evaluate_solution(sol: pd.DataFrame, inputs: Inputs, windows, job: Job) -> dict:
     """Errors of one solution against the job's reference (empty without a reference):
-    ``{"errors": table, "outages": table, "summary": dict}``."""
+    ``{"errors": table, "outages": table, "summary": dict}``. The summary and the outage
+    table are computed over every reference epoch; ``errors`` keeps the reference epochs at
+    the trajectory output rate only (:func:`stored_errors`)."""
     if inputs.reference is None or sol is None or not len(sol) or \
             not job["evaluation"]["enabled"]:  # (a filter stopped at its first epoch)
         return {}
@@ -50,7 +52,23 @@ def evaluate_solution(sol: pd.DataFrame, inputs: Inputs, windows, job: Job) -> d
     summary["n_reference"] = int(len(err))
     summary["n_covered"] = int(err["horizontal"].notna().sum())
     summary.update(position_nees(err, windows))
-    return {"errors": err, "outages": table, "summary": summary}
+    return {"errors": stored_errors(err, inputs, job), "outages": table, "summary": summary}
+
+
+def stored_errors(err: pd.DataFrame, inputs: Inputs, job: Job) -> pd.DataFrame:
+    """The rows of the error table kept in :attr:`JobResult.evaluation` ``["errors"]``: the
+    reference epochs at the trajectory output rate (``[outputs] rate_hz``, with the epochs
+    around each GNSS and control-point epoch, :func:`insgnss.io.native.decimation_rows`), the
+    epochs the report shows. The summary metrics are computed over every reference epoch
+    before; a 200 Hz reference over 10 h kept whole would hold 7.2 M rows (0.4 GB per
+    solution)."""
+    from ..io.native import decimation_rows
+
+    epochs = [x.index for x in (getattr(inputs, "gnss", None),
+                                getattr(inputs, "control_points", None)) if x is not None]
+    rows = decimation_rows(err.index.to_numpy(float), job["outputs"]["rate_hz"], epochs,
+                           job["process"]["preset"])
+    return err if rows is None else err.iloc[rows].copy()
 
 
 #: chi-square point of 3 dof at the 3-sigma probability (99.73 %)
@@ -109,4 +127,4 @@ def evaluate_result(out: JobResult) -> JobResult:
     return out
 
 
-__all__ = ["evaluate_result", "evaluate_solution"]
+__all__ = ["evaluate_result", "evaluate_solution", "stored_errors"]
