@@ -112,3 +112,43 @@ def test_stored_errors_keep_the_output_rate_epochs_and_the_aiding_epochs():
     every = stored_errors(err, inputs, {"outputs": {"rate_hz": "imu"},
                                         "process": {"preset": "standard"}})
     assert len(every) == len(err)
+
+
+def test_reference_errors_in_blocks_equal_the_whole_table():
+    """Errors formed block by block of reference epochs from the bracketing solution rows
+    (a store Table, blocks of 7 epochs) are bit-identical to those of the whole solution, at
+    the antenna (attitude used) and with reference epochs outside the solution and in a gap."""
+    from types import SimpleNamespace
+
+    from insgnss.filter.store import Table
+    from insgnss.job.evaluation import reference_errors
+
+    rng = np.random.default_rng(3)
+    ts = np.arange(0.0, 20.0, 0.01)
+    ts = np.delete(ts, np.arange(800, 900))  # a 1 s gap: not covered
+    n = ts.size
+    sol = pd.DataFrame({"lat": np.radians(48.0) + 1e-7 * np.cumsum(rng.normal(size=n)),
+                        "lon": np.radians(11.0) + 1e-7 * np.cumsum(rng.normal(size=n)),
+                        "height": 500 + np.cumsum(rng.normal(size=n)) * 0.01,
+                        "roll": 0.01 * rng.normal(size=n), "pitch": 0.01 * rng.normal(size=n),
+                        "heading": np.linspace(0, 3, n),
+                        "east_std": 1 + ts * 0.01, "north_std": 2 + ts * 0.01,
+                        "up_std": 3 + ts * 0.01}, index=ts)
+    tr = np.concatenate([[-1.0], np.arange(0.0, 21.0, 0.037)])  # before, inside, after
+    ref = pd.DataFrame({"lat": np.full(tr.size, np.radians(48.0)),
+                        "lon": np.full(tr.size, np.radians(11.0)),
+                        "height": np.full(tr.size, 500.0)}, index=tr)
+    inputs = SimpleNamespace(reference=ref, reference_point="antenna",
+                             lever_arm=np.array([0.2, 1.0, 1.5]))
+    pt = move_point(sol, inputs.lever_arm)
+    whole = position_errors(pt, ref)
+    for c in ("east_std", "north_std", "up_std"):
+        whole[c] = np.interp(tr, ts, sol[c].to_numpy())
+    table = Table(ts, sol.to_numpy(), list(sol.columns))
+    blocks = reference_errors(table, inputs, block=7)
+    assert list(blocks.columns) == list(whole.columns)
+    np.testing.assert_array_equal(blocks.to_numpy(), whole.to_numpy())
+    assert np.isnan(blocks["east"].iloc[0]) and np.isnan(blocks["east"].iloc[-1])
+    gap = (tr > 8.0) & (tr < 8.99)
+    assert gap.any() and np.isnan(blocks.loc[gap, "east"]).all()
+    assert np.isfinite(blocks["east"]).sum() > 400

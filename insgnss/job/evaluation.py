@@ -31,16 +31,13 @@ def evaluate_solution(sol: pd.DataFrame, inputs: Inputs, windows, job: Job) -> d
     """Errors of one solution against the job's reference (empty without a reference):
     ``{"errors": table, "outages": table, "summary": dict}``. The summary and the outage
     table are computed over every reference epoch; ``errors`` keeps the reference epochs at
-    the trajectory output rate only (:func:`stored_errors`)."""
+    the trajectory output rate only (:func:`stored_errors`). ``sol`` is a DataFrame or a
+    solution table as the engine holds it (:class:`insgnss.filter.store.Table`), read in
+    blocks of reference epochs (:func:`reference_errors`)."""
     if inputs.reference is None or sol is None or not len(sol) or \
             not job["evaluation"]["enabled"]:  # (a filter stopped at its first epoch)
         return {}
-    pt = move_point(sol, inputs.lever_arm) if inputs.reference_point == "antenna" else sol
-    err = position_errors(pt, inputs.reference)
-    for s in ("east_std", "north_std", "up_std"):
-        if s in sol.columns:
-            err[s] = np.interp(err.index.to_numpy(float), sol.index.to_numpy(float),
-                               sol[s].to_numpy(float))
+    err = reference_errors(sol, inputs)
     ev = job["evaluation"]
     t_first = float(inputs.gnss.index[0]) if inputs.gnss is not None and len(inputs.gnss) \
         else float(inputs.reference.index[0])
@@ -53,6 +50,52 @@ def evaluate_solution(sol: pd.DataFrame, inputs: Inputs, windows, job: Job) -> d
     summary["n_covered"] = int(err["horizontal"].notna().sum())
     summary.update(position_nees(err, windows))
     return {"errors": stored_errors(err, inputs, job), "outages": table, "summary": summary}
+
+
+#: reference epochs per block of :func:`reference_errors`
+REFERENCE_BLOCK = 1 << 18
+
+
+def reference_errors(sol, inputs: Inputs, block: int = REFERENCE_BLOCK) -> pd.DataFrame:
+    """Position errors at every reference epoch (``east north up horizontal`` and, where the
+    solution has them, ``east_std north_std up_std`` interpolated there), at the point the
+    reference measures.
+
+    ``sol`` is a DataFrame or a :class:`insgnss.filter.store.Table`; for each block of
+    ``block`` reference epochs only the solution rows bracketing them are read (the rows the
+    interpolation uses, so the numbers are those of the whole table): no whole-log copy of
+    the solution columns is made."""
+    from ..filter.store import Table, select_rows
+
+    ref = inputs.reference
+    tr = ref.index.to_numpy(float)
+    ts = sol.time if isinstance(sol, Table) else sol.index.to_numpy(float)
+    cols = EVAL_COLUMNS + (ATTITUDE_COLUMNS if inputs.reference_point == "antenna" else ())
+    has = list(sol.columns) if hasattr(sol, "columns") else None
+    stds = [c for c in ("east_std", "north_std", "up_std") if has is None or c in has]
+    enu = np.empty((tr.size, 3))
+    sd = np.empty((tr.size, len(stds)))
+    for a in range(0, tr.size, block):
+        b = min(a + block, tr.size)
+        lo = max(int(np.searchsorted(ts, tr[a], side="right")) - 1, 0)
+        hi = min(int(np.searchsorted(ts, tr[b - 1], side="right")) + 1, ts.size)
+        part = select_rows(sol, lambda t, lo=lo, hi=hi: np.arange(lo, hi), cols)
+        if a == 0:  # the std columns the solution really has
+            stds = [c for c in stds if c in part.columns]
+            sd = sd[:, :len(stds)]
+        pt = move_point(part, inputs.lever_arm) if inputs.reference_point == "antenna" \
+            else part
+        e = position_errors(pt, ref.iloc[a:b])
+        enu[a:b] = e[["east", "north", "up"]].to_numpy(float)
+        tp = part.index.to_numpy(float)
+        for k, c in enumerate(stds):
+            sd[a:b, k] = np.interp(tr[a:b], tp, part[c].to_numpy(float))
+        del part, pt, e
+    err = pd.DataFrame(enu, index=ref.index, columns=["east", "north", "up"], copy=False)
+    err["horizontal"] = np.hypot(err["east"], err["north"])
+    for k, c in enumerate(stds):
+        err[c] = sd[:, k]
+    return err
 
 
 def stored_errors(err: pd.DataFrame, inputs: Inputs, job: Job) -> pd.DataFrame:
@@ -111,20 +154,18 @@ def evaluate_result(out: JobResult) -> JobResult:
     A solution the engine holds as arrays (:class:`insgnss.filter.store.Table`, possibly
     memory-mapped beyond ``[filter] store_memory_mb``) is read in blocks, and only the
     columns the evaluation uses: no whole-log DataFrame of all columns is built."""
-    from ..filter.store import select_rows, solution_table
+    from ..filter.store import solution_table
     from ..io.spill import trim_heap
 
     if out.inputs.reference is None or not out.job["evaluation"]["enabled"]:
         return out
-    cols = EVAL_COLUMNS + (ATTITUDE_COLUMNS if out.inputs.reference_point == "antenna" else ())
     for name in ("forward", "smoothed"):
-        sol = select_rows(solution_table(out.filter, name), lambda t: None, cols)
-        ev = evaluate_solution(sol, out.inputs, out.windows, out.job)
-        del sol
+        ev = evaluate_solution(solution_table(out.filter, name), out.inputs, out.windows,
+                               out.job)
         trim_heap()  # the solution's columns and the temporaries go back to the system
         if ev:
             out.evaluation[name] = ev
     return out
 
 
-__all__ = ["evaluate_result", "evaluate_solution", "stored_errors"]
+__all__ = ["evaluate_result", "evaluate_solution", "reference_errors", "stored_errors"]
