@@ -747,6 +747,9 @@ SCHEMA: dict[str, Any] = {
                                 "epoch)", check=POSITIVE, min_imu_intervals=1),
         "discretization": _spec(str, "second_order", "Phi/Qd discretization",
                                 choices=["second_order", "vanloan"]),
+        "kalman": _spec(str, "compiled", "Kalman predict/update of the GNSS and other general "
+                        "epochs: compiled, or filterpy's (the reference, for checking; "
+                        "docs/filter.md)", choices=["compiled", "filterpy"]),
         "gate_probability": _spec(_NUM, 0.9999, "chi-square gate of every measurement",
                                   check=_number(0.0, 1.0, hi_open=True, note="0: off")),
         "gate_recovery": _spec(_NUM, 5.0, "after this many seconds of continuous rejection of "

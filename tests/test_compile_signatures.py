@@ -20,7 +20,7 @@ sys.path.insert(0, {tests!r})
 import numpy as np
 from filter_sim import car_truth, corrupt_imu, gnss_from_truth, perturbed_initial
 from insgnss.filter import FilterConfig, GnssPosition, GnssVelocity, run_filter
-from insgnss.filter import smoother
+from insgnss.filter import kalman, smoother
 from insgnss.imu import grade
 from insgnss.mechanization import strapdown
 from insgnss.mechanization.strapdown import mechanize
@@ -38,7 +38,8 @@ assert res.smoothed is not None
 kernels = {{"strapdown_step": strapdown.strapdown_step, "mbf_backward": smoother.mbf_backward,
            "mbf_backward15": getattr(smoother, "_mbf_backward15", None),
            "through_update": smoother._through_update,
-           "back_through_sparse": smoother._back_through_sparse}}
+           "back_through_sparse": smoother._back_through_sparse,
+           "kalman_predict": kalman._predict, "kalman_update": kalman._update}}
 print(json.dumps({{k: [str(s) for s in f.signatures] if f is not None else []
                   for k, f in kernels.items()}}))
 """
@@ -58,6 +59,9 @@ def test_one_specialisation_per_kernel_in_a_filter_run(tmp_path):
     assert len(sigs["mbf_backward"]) == 1, sigs["mbf_backward"]
     assert sigs["mbf_backward15"] == []
     assert len(sigs["through_update"]) == 1, sigs["through_update"]
+    # the general epochs' predict/update: one specialisation whatever the stacked row count
+    assert len(sigs["kalman_predict"]) == 1, sigs["kalman_predict"]
+    assert len(sigs["kalman_update"]) == 1, sigs["kalman_update"]
     assert len(sigs["back_through_sparse"]) == 1, sigs["back_through_sparse"]
 
 

@@ -3,9 +3,10 @@
 Structure
 ---------
 The engine owns the event loop and everything that does not depend on the process or the
-measurement: the epoch schedule (:mod:`.schedule`), covariance propagation with filterpy's
-``predict``, gating and gate recovery (:mod:`.gating`), health checks (:mod:`.health`), the
-stacked Joseph-form update with filterpy's ``update``, closed-loop feedback and reset, the
+measurement: the epoch schedule (:mod:`.schedule`), covariance propagation (compiled
+``predict``, :mod:`.kalman`), gating and gate recovery (:mod:`.gating`), health checks
+(:mod:`.health`), the stacked Joseph-form update (compiled ``update``, :mod:`.kalman`;
+filterpy's with ``FilterConfig.kalman = "filterpy"``), closed-loop feedback and reset, the
 smoother's storage and backward pass (:mod:`.store`, :mod:`.smoother`) and the compiled
 high-rate path (:mod:`.highrate`). It has two plug points:
 
@@ -22,11 +23,11 @@ For every epoch ``e`` (:func:`.schedule.build_schedule`):
 1. *propagate*: if the segment holds high-rate measurements, the compiled path runs it sample
    by sample (a node per IMU sample, updates at the samples that have high-rate events); then
    the process model advances the nominal to the epoch and gives ``Phi, Qd``, and
-   ``filterpy.kalman.predict`` propagates ``x, P``;
+   :func:`.kalman.predict` propagates ``x, P``;
 2. *update*: each measurement at the epoch gives ``(z, H, R)`` (mapped onto the process
    model's state); the innovation passes a chi-square gate against the predicted ``P`` or is
    rejected and logged (gate recovery may inflate ``P``); the accepted ones are applied
-   together with ``filterpy.kalman.update`` (Joseph form ``(I-KH) P (I-KH)^T + K R K^T``;
+   together with :func:`.kalman.update` (Joseph form ``(I-KH) P (I-KH)^T + K R K^T``;
    independent noises, so stacking equals sequential updates);
 3. *feedback*: the error estimate is fed back into the nominal and reset to zero;
 4. *store*: the node (``P(e|e-1)``, ``P(e|e)``, ``Phi``, feedback, the update's ``H, K,
@@ -56,6 +57,8 @@ from . import gating, health, highrate
 from .gating import GateTable
 from .heading_reinit import HeadingMonitor, HeadingReinit, reset_covariance
 from .health import RunawayNis, check_covariance
+from .kalman import KALMAN_BACKENDS
+from .kalman import backend as kalman_backend
 from .measurements import Measurement
 from .models import BIAS_MODELS, ERROR_DYNAMICS, StateLayout
 from .process import ProcessModelBase
@@ -69,25 +72,6 @@ __all__ = ["BIAS_COLS", "STD_COLS", "FilterConfig", "FilterResult", "run_filter"
 
 BIAS_COLS = ["gyro_bias_x", "gyro_bias_y", "gyro_bias_z",
              "accel_bias_x", "accel_bias_y", "accel_bias_z"]
-
-
-_KF: tuple = ()
-
-
-def _filterpy():
-    """filterpy's ``predict`` and ``update``, imported on first use.
-
-    ``filterpy.kalman`` costs about 0.6-1 s to import, almost all of it ``scipy.stats``, which
-    ``filterpy/kalman/kalman_filter.py`` itself imports (through ``filterpy.stats``, for the
-    log-likelihood); loading that file alone therefore saves nothing, so the import is deferred
-    to the first filter run instead.
-    """
-    global _KF
-    if not _KF:
-        from filterpy.kalman import predict, update
-
-        _KF = (predict, update)
-    return _KF
 
 
 #: columns of ``FilterConfig.extra_noise`` (stds; missing ones are 0)
@@ -181,6 +165,10 @@ class FilterConfig:
         Re-initialise the heading of a land vehicle from the GNSS course when it disagrees
         with it while the GNSS innovations run away (:mod:`.heading_reinit`; LLF strapdown
         model only); ``None``: never.
+    kalman : {"compiled", "filterpy"}
+        Predict and update of the general epochs (GNSS and the other non high-rate
+        measurements): the compiled :func:`.kalman.predict` / :func:`.kalman.update`, or
+        filterpy's ``predict`` / ``update`` (the reference; same results to rounding, slower).
     store_allocate : callable or None
         ``allocate(shape, dtype)`` for the large arrays of the smoother's node store
         (:class:`.store.NodeStore`); None: in memory. A job passes
@@ -222,6 +210,7 @@ class FilterConfig:
     gyro_dynamic_noise: float = 0.0
     smoother_covariance: bool = True
     heading_reinit: HeadingReinit | None = None
+    kalman: str = "compiled"
     store_allocate: Callable | None = None
 
     def validate(self) -> None:
@@ -242,6 +231,9 @@ class FilterConfig:
         if not (self.nis_bound > 0):
             raise ConfigError("NIS bound must be positive", column="nis_bound",
                               found=self.nis_bound)
+        if self.kalman not in KALMAN_BACKENDS:
+            raise ConfigError("unknown Kalman backend", column="kalman",
+                              expected=list(KALMAN_BACKENDS), found=self.kalman)
         if self.error_dynamics not in ERROR_DYNAMICS:
             raise ConfigError("unknown error_dynamics", column="error_dynamics",
                               expected=list(ERROR_DYNAMICS), found=self.error_dynamics)
@@ -414,6 +406,8 @@ class _Run:
         self.last_accept = np.full(max(len(names), 1), -np.inf)  # per type
         self.log = InnovationLog(names)
         self.check = bool(config.check_health)
+        # Kalman predict/update of the general epochs: compiled (kalman.py) or filterpy's
+        self.kf_predict, self.kf_update = kalman_backend(config.kalman)
         self.timing = {"updates": 0.0}
         t = model.t
         tol = min(config.snap_tolerance, 1e-3 * float(np.median(np.diff(t))))
@@ -483,8 +477,7 @@ def _propagate(run: _Run, e: int, node: int, x, P):
             Qd[up, up] += run.xn_var[run.xn_i, 3]
             run.xn_i += 1
     c0 = _time.perf_counter()
-    kf_predict, _ = _filterpy()
-    x, P = kf_predict(x, P, Phi, Qd)
+    x, P = run.kf_predict(x, P, Phi, Qd)
     P = 0.5 * (P + P.T)
     if run.check:
         if not model.nominal_finite():
@@ -550,7 +543,7 @@ def _gate(run: _Run, m, time: float, z, H, R, P, label: str = ""):
 
 def _update(run: _Run, e: int, x, P):
     """Step 2: evaluate, gate and apply the measurements of epoch ``e`` (one stacked
-    filterpy update). Returns ``(x, P, P_predicted_seen, applied)``."""
+    compiled update). Returns ``(x, P, P_predicted_seen, applied)``."""
     sched, model = run.sched, run.model
     zs, Hs, Rs = [], [], []
     Pp = P
@@ -585,8 +578,7 @@ def _update(run: _Run, e: int, x, P):
             i1 = i0 + Rk.shape[0]
             R[i0:i1, i0:i1] = Rk
             i0 = i1
-    _, kf_update = _filterpy()
-    x, P = kf_update(x, P, z, R, H)
+    x, P = run.kf_update(x, P, z, R, H)
     P = 0.5 * (P + P.T)
     if run.check:
         check_covariance(x, P, sched.epochs[e], "update")

@@ -64,7 +64,7 @@ Filter framework
 ----------------
 :class:`RissModel` is a process model of the filter engine (:mod:`insgnss.filter.engine`):
 the engine runs the event loop (epochs at the measurements and every ``epoch_interval``;
-chi-square gating and gate recovery; health checks; filterpy predict/update in Joseph form;
+chi-square gating and gate recovery; health checks; compiled predict/update in Joseph form (kalman.py);
 closed-loop feedback and reset; the smoother) and :func:`run_riss_filter` returns the same
 :class:`~insgnss.filter.engine.FilterResult` as :func:`insgnss.filter.engine.run_filter`, with
 the same table columns (``NAV_COLS``, ``STD_COLS``, then the parameter states and their

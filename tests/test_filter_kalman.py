@@ -1,0 +1,79 @@
+"""The compiled Kalman predict/update of the engine's general epochs against filterpy's."""
+
+import numpy as np
+import pytest
+from filterpy.kalman import KalmanFilter
+from filterpy.kalman import predict as kf_predict
+from filterpy.kalman import update as kf_update
+
+from insgnss.errors import ConfigError
+from insgnss.filter import kalman
+from insgnss.filter.engine import FilterConfig
+
+
+def _case(rng, n, m):
+    A = rng.normal(size=(n, n))
+    P = A @ A.T + 0.1 * np.eye(n)
+    F = np.eye(n) + 0.05 * rng.normal(size=(n, n))
+    Q = np.diag(rng.uniform(1e-6, 1e-2, n))
+    H = rng.normal(size=(m, n))
+    B = rng.normal(size=(m, m))
+    R = B @ B.T + 0.01 * np.eye(m)
+    return rng.normal(size=n), P, F, Q, rng.normal(size=m), R, H
+
+
+def _close(a, b):
+    scale = max(np.abs(b).max(), 1.0)
+    assert np.abs(a - b).max() <= 1e-12 * scale
+
+
+@pytest.mark.parametrize("n,m", [(15, 1), (15, 3), (18, 6), (21, 9), (24, 12)])
+def test_compiled_equals_filterpy_functions_and_kalmanfilter(n, m):
+    rng = np.random.default_rng(100 * n + m)
+    for _ in range(20):
+        x, P, F, Q, z, R, H = _case(rng, n, m)
+        xc, Pc = kalman.predict(x, P, F, Q)
+        xf, Pf = kf_predict(x, P, F, Q)
+        _close(xc, xf)
+        _close(Pc, Pf)
+        xu, Pu = kalman.update(xc, Pc, z, R, H)
+        xg, Pg = kf_update(xf, Pf, z, R, H)
+        _close(xu, xg)
+        _close(Pu, Pg)
+        # the KalmanFilter object (its update is the Joseph form too)
+        kf = KalmanFilter(dim_x=n, dim_z=m)
+        kf.x, kf.P, kf.F, kf.Q, kf.H, kf.R = x.copy(), P.copy(), F, Q, H, R
+        kf.predict()
+        _close(xc, kf.x)
+        _close(Pc, kf.P)
+        kf.update(z)
+        _close(xu, kf.x)
+        _close(Pu, kf.P)
+
+
+def test_update_is_the_joseph_form_and_reduces_the_observed_variance():
+    rng = np.random.default_rng(7)
+    x, P, _, _, z, R, H = _case(rng, 15, 3)
+    x1, P1 = kalman.update(x, P, z, R, H)
+    S = H @ P @ H.T + R
+    K = P @ H.T @ np.linalg.inv(S)
+    I_KH = np.eye(15) - K @ H
+    np.testing.assert_allclose(P1, I_KH @ P @ I_KH.T + K @ R @ K.T, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(x1, x + K @ (z - H @ x), rtol=0, atol=1e-12)
+    # optimal gain: equals the short form (I - K H) P, and H P1 H^T < H P H^T
+    np.testing.assert_allclose(P1, I_KH @ P, rtol=0, atol=1e-10)
+    assert np.all(np.linalg.eigvalsh(H @ P @ H.T - H @ P1 @ H.T) > 0)
+    # inputs untouched, non-contiguous inputs accepted
+    x2, P2 = kalman.update(x, np.asfortranarray(P), z, R, np.asfortranarray(H))
+    np.testing.assert_array_equal(x2, x1)
+    _close(P2, P1)
+
+
+def test_backend_choice_and_validation():
+    assert kalman.backend("compiled") == (kalman.predict, kalman.update)
+    p, u = kalman.backend("filterpy")
+    assert p is kf_predict and u is kf_update
+    with pytest.raises(ValueError):
+        kalman.backend("sparse")
+    with pytest.raises(ConfigError):
+        FilterConfig(kalman="sparse").validate()
