@@ -158,3 +158,36 @@ def test_cli_import_with_a_shadowing_checkout(tmp_path):
     from insgnss._version import __version__
 
     assert out.stdout.strip() == __version__
+
+
+def test_filter_run_imports_no_filterpy_scipy_stats_or_plotting():
+    """A filter run with the default (compiled) Kalman backend loads neither filterpy (its
+    ``kalman`` package imports ``scipy.stats``), scipy.stats nor matplotlib; ``kalman = "filterpy"`` does
+    load filterpy (the reference path is really taken)."""
+    code = """
+        import sys
+        sys.path.insert(0, {tests!r})
+        import numpy as np
+        from filter_sim import car_truth, corrupt_imu, gnss_from_truth, perturbed_initial
+        from insgnss.imu import grade
+        truth = car_truth(30.0, 50.0)
+        rng = np.random.default_rng(4)
+        imu, _ = corrupt_imu(truth, grade("tactical"), rng)
+        gnss = gnss_from_truth(truth, rng)
+        init, _ = perturbed_initial(truth, rng)
+        pre = set(sys.modules)  # the simulation helpers load scipy.signal (and scipy.stats)
+        from insgnss.filter import FilterConfig, GnssPosition, GnssVelocity, run_filter
+        res = run_filter(imu, init, [GnssPosition(gnss), GnssVelocity(gnss)],
+                         FilterConfig(imu_model="tactical", kalman={kalman!r}))
+        assert res.complete and res.innovations["accepted"].all()
+        print(sorted(m for m in set(sys.modules) - pre
+                     if m.split(".")[0] in ("filterpy", "matplotlib")
+                     or m.startswith("scipy.stats")))
+    """
+    tests = str(REPO / "tests")
+    out = _python(code.format(tests=tests, kalman="compiled"))
+    assert out.returncode == 0, out.stderr[-3000:]
+    assert out.stdout.strip().splitlines()[-1] == "[]"
+    out = _python(code.format(tests=tests, kalman="filterpy"))
+    assert out.returncode == 0, out.stderr[-3000:]
+    assert "'filterpy.kalman'" in out.stdout.strip().splitlines()[-1]
