@@ -693,8 +693,8 @@ class BodyVelocity(Measurement):
         Initial sigma of the misalignment [rad].
     misalignment_initial : 3-vector
         Initial nominal value of the misalignment [rad] (default 0: the declared mounting), e.g.
-        a smoothed estimate of an earlier pass over the same data (``aiding.
-        nhc_misalignment_relinearize``).
+        a smoothed estimate of an earlier pass over the same data (``[filter]
+        smoother_passes``).
     pitch_compliance_state : str, optional
         Name of a 1-element suspension pitch-compliance state ``kappa`` [rad / (m/s^2)]
         (random constant, zero initial value; needs the vertical axis 2 and the Python update

@@ -147,9 +147,10 @@ class StrapdownModel(ProcessModelBase):
         self.vel = np.array(initial.vel, float).copy()
         self.C = np.ascontiguousarray(initial.C, dtype=float).copy()
         self.pnom = pm.initial_values.copy()
+        index = {label: i for i, label in enumerate(layout.labels)}
         for label, value in (config.initial_parameters or {}).items():
-            if label in layout.labels and layout.labels.index(label) >= 9:
-                self.pnom[layout.labels.index(label) - 9] = float(value)
+            if index.get(label, -1) >= 9:  # parameter states follow the 9 navigation errors
+                self.pnom[index[label] - 9] = float(value)
         self.par_decay = pm.decay[9:].copy()
         self.has_decay = bool(np.any(self.par_decay > 0))
         # coupled augmenting states: their nominal follows p' = (Fx - diag(decay)) p

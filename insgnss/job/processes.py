@@ -225,6 +225,7 @@ def relinearized_start(init: Initialization, smoothed) -> tuple[Initialization, 
     pass's estimate, well inside those sigmas).
     """
     from ..mechanization import NavState
+    from ..mechanization.core import NAV_COLS
 
     row = smoothed.iloc[0]
     st = init.state
@@ -233,8 +234,7 @@ def relinearized_start(init: Initialization, smoothed) -> tuple[Initialization, 
                                 float(row["roll"]), float(row["pitch"]), float(row["heading"]),
                                 time=float(st.time))
     state.wander_angle = st.wander_angle
-    skip = {"lat", "lon", "height", "vel_e", "vel_n", "vel_u", "roll", "pitch", "heading",
-            "time", "segment"}
+    skip = {*NAV_COLS, "time", "segment"}
     pars = {c: float(row[c]) for c in smoothed.columns
             if c not in skip and not c.endswith("_std") and np.isfinite(row[c])}
     gb = [pars.get(f"gyro_bias_{a}") for a in "xyz"]
