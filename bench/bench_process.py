@@ -207,8 +207,10 @@ if os.environ.get("BENCH_STAGES"):  # --stages: resident memory sampled per stag
     order[:0] = ["start-up (imports)", "job (rest)"]
     peaks["start-up (imports)"] = rss()
     atexit.register(lambda: marks.update(stages=[(k, peaks.get(k, 0.0)) for k in order]))
-from insgnss.cli import main
-sys.exit(main())
+import insgnss.cli as cli
+if hasattr(cli, "entry"):  # the console script's entry (ends without the teardown)
+    cli.entry()
+sys.exit(cli.main())
 """
 
 

@@ -13,9 +13,12 @@ that write outputs check and lock their output folder before computing
 from __future__ import annotations
 
 import argparse
+import atexit
 import importlib
+import os
 import pkgutil
 import sys
+import threading
 
 from . import commands
 from ._version import __version__
@@ -82,5 +85,34 @@ def main(argv: list[str] | None = None) -> int:
         warnings.formatwarning = saved
 
 
+def entry() -> None:
+    """The console script ``insgnss`` (and ``python -m insgnss.cli``): :func:`main`, then
+    the process ends at once (:func:`exit_now`) instead of through the interpreter's
+    teardown.
+
+    The teardown of a long run frees every object one by one (the tables, the filter's
+    node store, the compiled kernels' modules): 1.2-1.4 s of a 1 h / 200 Hz ``process`` run,
+    after every output is written and closed. Code that calls :func:`main` in a process
+    that goes on (the tests, scripts) keeps the normal exit.
+    """
+    exit_now(main())
+
+
+def exit_now(code: int) -> None:
+    """End the process with status ``code`` without the interpreter's teardown: the exit
+    handlers (:mod:`atexit`, e.g. ``weakref.finalize`` callbacks) run and ``stdout`` /
+    ``stderr`` are flushed first, then :func:`os._exit`. With other threads still running
+    the normal exit (which waits for them) is taken."""
+    if threading.active_count() > 1:
+        sys.exit(code)
+    atexit._run_exitfuncs()
+    for stream in (sys.stdout, sys.stderr):
+        try:
+            stream.flush()
+        except (OSError, ValueError):  # a closed pipe or stream: nothing left to save
+            pass
+    os._exit(code)
+
+
 if __name__ == "__main__":  # pragma: no cover
-    sys.exit(main())
+    entry()

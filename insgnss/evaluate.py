@@ -18,9 +18,10 @@ from __future__ import annotations
 
 import numpy as np
 import pandas as pd
+from numba import njit
 
 from .attitude import euler_to_dcm
-from .earth import ecef_to_enu_vectors, enu_displacement_to_geodetic, geodetic_to_ecef
+from .earth import enu_displacement_to_geodetic, geodetic_to_ecef_nb
 from .outages import in_windows, window_index
 
 
@@ -40,31 +41,42 @@ def move_point(traj: pd.DataFrame, lever_arm) -> pd.DataFrame:
     return out
 
 
-#: reference epochs per block of :func:`position_errors`
-_BLOCK = 1 << 16
-
-
-def _position_errors_block(ts, tr, sol, ref, max_gap: float) -> np.ndarray:
-    """ENU errors (N, 3) at the reference epochs ``tr`` (geodetic ``ref``) of the solution at
-    ``ts`` (geodetic columns ``sol``), interpolated linearly in ECEF between the bracketing
-    samples (only those are converted); NaN where not covered."""
-    j = np.searchsorted(ts, tr, side="right")
-    ok = (j > 0) & (j < ts.size)
-    jj = np.clip(j, 1, ts.size - 1)
-    t0, t1 = ts[jj - 1], ts[jj]
-    ok &= (t1 - t0) <= max_gap
-    jprev = np.clip(j - 1, 0, ts.size - 1)
-    exact = np.isclose(ts[jprev], tr, atol=1e-4, rtol=0)
-    w = np.where(t1 > t0, (tr - t0) / np.where(t1 > t0, t1 - t0, 1.0), 0.0)
-    x0 = np.column_stack(geodetic_to_ecef(*(c[jj - 1] for c in sol)))
-    x1 = np.column_stack(geodetic_to_ecef(*(c[jj] for c in sol)))
-    xi = x0 + w[:, None] * (x1 - x0)
-    snap = ~ok & exact
-    xi[snap] = np.column_stack(geodetic_to_ecef(*(c[jprev[snap]] for c in sol)))
-    ok |= exact
-    enu = ecef_to_enu_vectors(xi - np.column_stack(geodetic_to_ecef(*ref)), ref[0], ref[1])
-    enu[~ok] = np.nan
-    return enu
+@njit(cache=True)
+def _position_errors_nb(ts, slat, slon, sh, tr, rlat, rlon, rh, jr, max_gap):
+    """ENU errors (N, 3) at the reference epochs ``tr`` (geodetic ``rlat rlon rh``) of the
+    solution at ``ts`` (geodetic ``slat slon sh``): the bracketing solution samples (at most
+    ``max_gap`` apart) converted to ECEF and interpolated linearly there, the difference to
+    the reference point rotated into its ENU axes (``C_e^l``, :func:`ecef_to_enu_matrix`);
+    an epoch within 1e-4 s of a solution sample and not bracketed takes that sample; NaN
+    where not covered. ``jr``: the solution samples at or before each reference epoch
+    (``searchsorted(ts, tr, "right")``)."""
+    n, ns = tr.size, ts.size
+    out = np.empty((n, 3))
+    for k in range(n):
+        t = tr[k]
+        j = jr[k]
+        jj = min(max(j, 1), ns - 1)
+        jprev = min(max(j - 1, 0), ns - 1)
+        t0, t1 = ts[jj - 1], ts[jj]
+        ok = j > 0 and j < ns and (t1 - t0) <= max_gap
+        exact = abs(ts[jprev] - t) <= 1e-4
+        if ok:
+            w = (t - t0) / (t1 - t0) if t1 > t0 else 0.0
+            x0, y0, z0 = geodetic_to_ecef_nb(slat[jj - 1], slon[jj - 1], sh[jj - 1])
+            x1, y1, z1 = geodetic_to_ecef_nb(slat[jj], slon[jj], sh[jj])
+            x, y, z = x0 + w * (x1 - x0), y0 + w * (y1 - y0), z0 + w * (z1 - z0)
+        elif exact:
+            x, y, z = geodetic_to_ecef_nb(slat[jprev], slon[jprev], sh[jprev])
+        else:
+            out[k, 0] = out[k, 1] = out[k, 2] = np.nan
+            continue
+        xr, yr, zr = geodetic_to_ecef_nb(rlat[k], rlon[k], rh[k])
+        dx, dy, dz = x - xr, y - yr, z - zr
+        sl, cl, so, co = np.sin(rlat[k]), np.cos(rlat[k]), np.sin(rlon[k]), np.cos(rlon[k])
+        out[k, 0] = -so * dx + co * dy
+        out[k, 1] = -sl * co * dx - sl * so * dy + cl * dz
+        out[k, 2] = cl * co * dx + cl * so * dy + sl * dz
+    return out
 
 
 def position_errors(solution: pd.DataFrame, reference: pd.DataFrame, *,
@@ -76,13 +88,13 @@ def position_errors(solution: pd.DataFrame, reference: pd.DataFrame, *,
     """
     ts = solution.index.to_numpy(float)
     tr = reference.index.to_numpy(float)
-    sol = [solution[c].to_numpy() for c in ("lat", "lon", "height")]
-    ref = [reference[c].to_numpy() for c in ("lat", "lon", "height")]
-    enu = np.empty((tr.size, 3))
-    # blocks of reference epochs: the temporaries stay small on long logs (same numbers)
-    for a in range(0, tr.size, _BLOCK):
-        b = min(a + _BLOCK, tr.size)
-        enu[a:b] = _position_errors_block(ts, tr[a:b], sol, [r[a:b] for r in ref], max_gap)
+    sol = [np.ascontiguousarray(solution[c].to_numpy(float)) for c in ("lat", "lon", "height")]
+    ref = [np.ascontiguousarray(reference[c].to_numpy(float)) for c in ("lat", "lon", "height")]
+    if not ts.size:
+        enu = np.full((tr.size, 3), np.nan)
+    else:
+        j = np.searchsorted(ts, tr, side="right")
+        enu = _position_errors_nb(ts, *sol, tr, *ref, j, float(max_gap))
     out = pd.DataFrame(enu, index=reference.index, columns=["east", "north", "up"], copy=False)
     out["horizontal"] = np.hypot(out["east"], out["north"])
     return out

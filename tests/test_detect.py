@@ -80,6 +80,32 @@ def test_statistics_against_brute_force_windows():
                                rtol=1e-12)
 
 
+def test_amv_statistic_sliding_sums_over_many_blocks():
+    """The sliding sums of amv_statistic (refreshed every AMV_BLOCK samples) against the
+    two-pass standard deviation of every window: a still stretch (gravity plus 0.01 m/s^2 of
+    noise, where E[x^2] - E[x]^2 about zero would lose 8 digits) then motion of several
+    m/s^2, over ten blocks and both truncated ends."""
+    from numpy.lib.stride_tricks import sliding_window_view
+
+    from insgnss.detect import AMV_BLOCK
+
+    rng = np.random.default_rng(11)
+    n, W = 10 * AMV_BLOCK + 37, 100
+    a = rng.normal([0.2, -0.1, G], 0.01, (n, 3))
+    a[n // 2:] += 3.0 * np.sin(np.arange(n - n // 2)[:, None] * [0.01, 0.02, 0.005])
+    pad_lo, pad_hi = (W - 1) // 2, W - 1 - (W - 1) // 2
+    full = sliding_window_view(a, W, axis=0)  # windows k - pad_lo .. k + pad_hi inside
+    expect = np.empty(n)
+    inner = np.sqrt(np.sum(full.var(axis=2), axis=1))
+    expect[pad_lo:n - pad_hi] = inner
+    for k in [*range(pad_lo), *range(n - pad_hi, n)]:
+        aa = a[max(0, k - pad_lo):min(n, k + pad_hi + 1)]
+        expect[k] = np.sqrt(np.mean(np.sum((aa - aa.mean(0)) ** 2, 1)))
+    got = amv_statistic(a, W)
+    np.testing.assert_allclose(got, expect, rtol=1e-10)
+    assert 0.015 < np.median(got[: n // 2 - W]) < 0.02  # sqrt(3) * 0.01 in the still part
+
+
 def test_running_max_min_match_brute_force():
     x = np.random.default_rng(0).normal(size=301)
     for half in (0, 1, 7, 40, 400):

@@ -342,9 +342,9 @@ class Table:
             rows = np.asarray(rows, np.int64)
             for i, j in self.blocks():
                 a, b = np.searchsorted(rows, (i, j))
-                if b > a:
-                    sel = self.values[rows[a:b]]
-                    out[a:b] = sel if full else sel[:, idx]
+                if b > a:  # only the asked columns are gathered (not whole rows)
+                    r = rows[a:b]
+                    out[a:b] = self.values[r] if full else self.values[np.ix_(r, idx)]
             t = self.time[rows]
         return pd.DataFrame(out, index=pd.Index(t, name="time"), columns=cols, copy=False)
 
