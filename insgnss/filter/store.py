@@ -162,12 +162,10 @@ class NodeStore:
         self.reserve_rows(m, int(np.count_nonzero(H)))
         r = self.n_rows
         nz = int(self.H_ptr[r])
-        for a in range(m):
-            cols = np.flatnonzero(H[a])
-            self.H_col[nz:nz + cols.size] = cols
-            self.H_val[nz:nz + cols.size] = H[a, cols]
-            nz += cols.size
-            self.H_ptr[r + a + 1] = nz
+        rows, cols = np.nonzero(H)  # row by row, columns ascending: the CSR order
+        self.H_col[nz:nz + cols.size] = cols
+        self.H_val[nz:nz + cols.size] = H[rows, cols]
+        self.H_ptr[r + 1:r + m + 1] = nz + np.cumsum(np.bincount(rows, minlength=m))
         self.K[r:r + m] = K.T
         self.G[r:r + m] = G
         self.s[r:r + m] = s
