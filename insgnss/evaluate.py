@@ -52,6 +52,8 @@ def _position_errors_nb(ts, slat, slon, sh, tr, rlat, rlon, rh, jr, max_gap):
     (``searchsorted(ts, tr, "right")``)."""
     n, ns = tr.size, ts.size
     out = np.empty((n, 3))
+    last = -1  # the solution sample converted last (x1): the next epoch's x0 at the same rate
+    x1 = y1 = z1 = 0.0
     for k in range(n):
         t = tr[k]
         j = jr[k]
@@ -62,8 +64,13 @@ def _position_errors_nb(ts, slat, slon, sh, tr, rlat, rlon, rh, jr, max_gap):
         exact = abs(ts[jprev] - t) <= 1e-4
         if ok:
             w = (t - t0) / (t1 - t0) if t1 > t0 else 0.0
-            x0, y0, z0 = geodetic_to_ecef_nb(slat[jj - 1], slon[jj - 1], sh[jj - 1])
-            x1, y1, z1 = geodetic_to_ecef_nb(slat[jj], slon[jj], sh[jj])
+            if last == jj - 1:
+                x0, y0, z0 = x1, y1, z1
+            else:
+                x0, y0, z0 = geodetic_to_ecef_nb(slat[jj - 1], slon[jj - 1], sh[jj - 1])
+            if last != jj:
+                x1, y1, z1 = geodetic_to_ecef_nb(slat[jj], slon[jj], sh[jj])
+                last = jj
             x, y, z = x0 + w * (x1 - x0), y0 + w * (y1 - y0), z0 + w * (z1 - z0)
         elif exact:
             x, y, z = geodetic_to_ecef_nb(slat[jprev], slon[jprev], sh[jprev])
