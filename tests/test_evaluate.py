@@ -48,6 +48,61 @@ def test_position_errors_interpolates_and_measures():
     assert err2.loc[40.25:40.75, "east"].isna().all()
 
 
+
+def _errors_by_arrays(sol, ref, max_gap):
+    """The array formula of position_errors (bracketing samples to ECEF, interpolation, the
+    difference in the ENU axes of the reference point; a sample within 1e-4 s taken as it
+    is): what the compiled kernel must give."""
+    from insgnss.earth import ecef_to_enu_vectors, geodetic_to_ecef
+
+    ts, tr = sol.index.to_numpy(float), ref.index.to_numpy(float)
+    s = [sol[c].to_numpy(float) for c in ("lat", "lon", "height")]
+    r = [ref[c].to_numpy(float) for c in ("lat", "lon", "height")]
+    j = np.searchsorted(ts, tr, side="right")
+    ok = (j > 0) & (j < ts.size)
+    jj = np.clip(j, 1, ts.size - 1)
+    t0, t1 = ts[jj - 1], ts[jj]
+    ok &= (t1 - t0) <= max_gap
+    jprev = np.clip(j - 1, 0, ts.size - 1)
+    exact = np.abs(ts[jprev] - tr) <= 1e-4
+    w = np.where(t1 > t0, (tr - t0) / np.where(t1 > t0, t1 - t0, 1.0), 0.0)
+    x0 = np.column_stack(geodetic_to_ecef(*(c[jj - 1] for c in s)))
+    x1 = np.column_stack(geodetic_to_ecef(*(c[jj] for c in s)))
+    xi = x0 + w[:, None] * (x1 - x0)
+    snap = ~ok & exact
+    xi[snap] = np.column_stack(geodetic_to_ecef(*(c[jprev[snap]] for c in s)))
+    enu = ecef_to_enu_vectors(xi - np.column_stack(geodetic_to_ecef(*r)), r[0], r[1])
+    enu[~(ok | exact)] = np.nan
+    return enu
+
+
+@pytest.mark.parametrize("dt_sol", [0.25, 0.01, 0.7])
+def test_position_errors_kernel_equals_the_array_formula(dt_sol):
+    """The compiled kernel against the array formula: the solution at the reference rate
+    (each sample the end of one bracket and the start of the next), faster and slower; a gap
+    wider than max_gap (NaN), reference epochs before and after the solution (NaN); at the
+    rate of the reference the samples lie 3e-5 s after its epochs."""
+    rng = np.random.default_rng(5)
+    t_ref = np.arange(-2.0, 102.0, 0.25)
+    ref = _track(t_ref, 12 * t_ref, 3 * np.sin(t_ref / 7), 0.5 * t_ref)
+    t_sol = np.arange(0.0, 100.0, dt_sol) + (3e-5 if dt_sol == 0.25 else 0.0)
+    t_sol = t_sol[(t_sol < 40.0) | (t_sol > 43.0)]
+    sol = _track(t_sol, 12 * t_sol + rng.normal(0, 0.5, t_sol.size),
+                 3 * np.sin(t_sol / 7) + rng.normal(0, 0.5, t_sol.size),
+                 0.5 * t_sol + rng.normal(0, 0.2, t_sol.size))
+    got = position_errors(sol, ref, max_gap=1.0)[["east", "north", "up"]].to_numpy()
+    want = _errors_by_arrays(sol, ref, 1.0)
+    np.testing.assert_array_equal(np.isnan(got), np.isnan(want))
+    np.testing.assert_allclose(got[~np.isnan(got)], want[~np.isnan(want)], rtol=0, atol=1e-9)
+    assert np.isnan(got[t_ref < 0.0]).all() and np.isnan(got[t_ref > 100.0]).all()
+    covered = ~np.isnan(got[:, 0])
+    inside = (t_ref >= t_sol[0]) & (t_ref <= t_sol[-1])
+    before, after = t_sol[t_sol < 40.0][-1], t_sol[t_sol > 40.0][0]
+    gap = (t_ref > before + 1e-4) & (t_ref < after)  # a bracket wider than max_gap
+    assert gap.sum() >= 12 and not covered[gap].any()
+    assert covered[inside & ~gap].all()
+
+
 def test_lever_arm_moves_point():
     t = np.arange(3.0)
     tr = _track(t, 0 * t, 0 * t, 0 * t)
