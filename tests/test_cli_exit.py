@@ -48,3 +48,14 @@ def test_exit_now_waits_for_other_threads():
              "exit_now(4)\n")
     assert r.returncode == 4
     assert r.stdout == "thread done\n"
+
+
+def test_exit_now_does_not_wait_for_daemon_threads():
+    # a daemon thread (tqdm's monitor) ends with the process, as at a normal exit
+    r = _run("import threading, time\n"
+             "from insgnss.cli import exit_now\n"
+             "threading.Thread(target=time.sleep, args=(30,), daemon=True).start()\n"
+             "print('before', flush=False)\n"
+             "exit_now(5)\n")
+    assert r.returncode == 5
+    assert r.stdout == "before\n"
