@@ -77,3 +77,22 @@ def test_backend_choice_and_validation():
         kalman.backend("sparse")
     with pytest.raises(ConfigError):
         FilterConfig(kalman="sparse").validate()
+
+
+@pytest.mark.parametrize("n,m", [(15, 3), (15, 6), (21, 9)])
+def test_smoother_record_equals_the_numpy_solve(n, m):
+    """K = Pp H^T S^-1, G = S^-1 H, s = S^-1 z of the compiled record against the numpy form
+    the engine used (stack [H z], one solve)."""
+    rng = np.random.default_rng(11 * n + m)
+    for _ in range(10):
+        _, P, _, _, z, R, H = _case(rng, n, m)
+        K, G, s = kalman.smoother_record(P, H, R, z)
+        S = H @ P @ H.T + R
+        Gs = np.linalg.solve(S, np.column_stack([H, z]))
+        _close(G, Gs[:, :-1])
+        _close(s, Gs[:, -1])
+        _close(K, P @ Gs[:, :-1].T)
+        # the definitions: S G = H, S s = z, K S = Pp H^T
+        np.testing.assert_allclose(S @ G, H, rtol=0, atol=1e-9 * np.abs(H).max())
+        np.testing.assert_allclose(K @ S, P @ H.T, rtol=0, atol=1e-9 * np.abs(P @ H.T).max())
+        assert K.shape == (n, m) and G.shape == (m, n) and s.shape == (m,)

@@ -118,6 +118,23 @@ def test_gnss_position_jacobian_and_value():
     assert np.allclose(z, expect, atol=1e-6)
 
 
+def test_gnss_position_across_the_antimeridian_is_metres():
+    """The compiled GNSS position model wraps the longitude difference (as
+    NominalState.enu_offset): a fix 2e-7 rad east of the nominal across +-pi gives metres."""
+    lay = StateLayout()
+    lon = np.pi - 1e-7
+    nav = _nav(lay, lon=lon)
+    g = _gnss_table(nav)
+    g["lon"] = -np.pi + 1e-7  # 2e-7 rad east of the nominal, across the antimeridian
+    z, H, R = GnssPosition(g).evaluate(0, nav)
+    _, N = radii(nav.lat)
+    assert z[0] == pytest.approx(-2e-7 * (N + nav.height) * np.cos(nav.lat), abs=1e-6)
+    np.testing.assert_allclose(z, nav.enu_offset(*g[["lat", "lon", "height"]].iloc[0]),
+                               rtol=0, atol=1e-9)
+    np.testing.assert_array_equal(np.diag(R), [0.25, 0.36, 1.0])
+    assert H.shape == (3, lay.n) and np.array_equal(H[:, 0:3], np.eye(3))
+
+
 def test_gnss_velocity_jacobian_with_lever_arm():
     lay = StateLayout()
     nav = _nav(lay)

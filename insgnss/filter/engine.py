@@ -57,7 +57,7 @@ from . import gating, health, highrate
 from .gating import GateTable
 from .heading_reinit import HeadingMonitor, HeadingReinit, reset_covariance
 from .health import RunawayNis, check_covariance
-from .kalman import KALMAN_BACKENDS
+from .kalman import KALMAN_BACKENDS, smoother_record
 from .kalman import backend as kalman_backend
 from .measurements import Measurement
 from .models import BIAS_MODELS, ERROR_DYNAMICS, StateLayout
@@ -394,6 +394,11 @@ class _Run:
                 names.append(m.name)
         self.tid = {name: i for i, name in enumerate(names)}
         self.gates = GateTable(config.gate_probability, config.gate_probabilities)
+        # per general model, looked up once instead of at every measurement: (type id,
+        # gating probability, recoverable, labelled rows)
+        self.ginfo = [(self.tid[m.name], self.gates.probability(m),
+                       bool(getattr(m, "recoverable", False)), hasattr(m, "row_label"))
+                      for m in self.general]
         # gate recovery time per type; -1 (never) for types that may not be forced in
         # (Measurement.recoverable: constraints such as NHC, a vehicle's ZUPT, odometer)
         rec = -1.0 if config.gate_recovery is None else float(config.gate_recovery)
@@ -512,18 +517,20 @@ def _streak_row(run: _Run, tid: int, label: str) -> int:
     return row
 
 
-def _gate(run: _Run, m, time: float, z, H, R, P, label: str = ""):
+def _gate(run: _Run, m, info, time: float, z, H, R, P, label: str = ""):
     """Gate one measurement against the predicted ``P``: ``(accepted, P, S, nis)``; a gate
     recovery returns the inflated ``P``. A labelled row (one satellite of a pseudorange model)
     keeps its own rejection streak, and recovers only when no measurement of its type was
-    accepted for longer than the recovery time (:mod:`.gating`, "Labelled rows")."""
+    accepted for longer than the recovery time (:mod:`.gating`, "Labelled rows"). ``info``:
+    the model's entry of ``run.ginfo``."""
+    tid, prob, recoverable = info[0], info[1], info[2]
     S = H @ P @ H.T + R
     nis = gating.nis(S, z)
-    tid = run.tid[m.name]
-    run.runaway.push(tid, m.name, time, nis / z.size)
-    if getattr(m, "recoverable", False) and not nis / z.size <= run.abs_nis:
-        run.abs_nis = nis / z.size  # for the heading monitor (NaN start: the first one)
-    thr = run.gates.threshold(run.gates.probability(m), z.size)
+    nn = nis / z.size
+    run.runaway.push(tid, m.name, time, nn)
+    if recoverable and not nn <= run.abs_nis:
+        run.abs_nis = nn  # for the heading monitor (NaN start: the first one)
+    thr = run.gates.threshold(prob, z.size)
     row = _streak_row(run, tid, label)  # may grow run.streak: before passing the array
     rec = run.recovery[tid]  # -1 for a type that may not be forced in
     code = gating.gate_step(run.streak, row, time, nis, thr, rec)
@@ -547,10 +554,13 @@ def _update(run: _Run, e: int, x, P):
     sched, model = run.sched, run.model
     zs, Hs, Rs = [], [], []
     Pp = P
+    general, ginfo = run.general, run.ginfo
+    ev_m, ev_t, ev_r = sched.ev_m, sched.ev_t, sched.ev_r
     for k in range(sched.ptr[e], sched.ptr[e + 1]):
-        m = run.general[sched.ev_m[k]]
-        time = sched.ev_t[k]
-        row = int(sched.ev_r[k])
+        im = ev_m[k]
+        m, info = general[im], ginfo[im]
+        time = ev_t[k]
+        row = int(ev_r[k])
         res = m.evaluate(row, model.nominal(time))
         if res is None:
             continue
@@ -558,8 +568,8 @@ def _update(run: _Run, e: int, x, P):
         if res is None:
             continue
         z, H, R = res
-        label = m.row_label(row) if hasattr(m, "row_label") else ""
-        ok, recovered, P = _gate(run, m, time, z, H, R, P, label)
+        label = m.row_label(row) if info[3] else ""
+        ok, recovered, P = _gate(run, m, info, time, z, H, R, P, label)
         if recovered:
             Pp = P  # the gate recovery inflated P(e|e-1): the smoother needs it
         if ok:
@@ -585,10 +595,8 @@ def _update(run: _Run, e: int, x, P):
     if run.config.smoother:
         # the smoother's record of the update: H, K = Pp H^T S^-1, S^-1 H, S^-1 z (a
         # forward-only run, e.g. of the self-tuning, skips it: a solve per epoch)
-        S = H @ Pp @ H.T + R
-        Gs = np.linalg.solve(S, np.column_stack([H, z]))
-        G = Gs[:, :-1]
-        run.store.add_update(H, Pp @ G.T, G, Gs[:, -1])
+        K, G, s = smoother_record(Pp, H, R, z)
+        run.store.add_update(H, K, G, s)
     return x, P, Pp, True
 
 

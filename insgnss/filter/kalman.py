@@ -22,7 +22,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-__all__ = ["KALMAN_BACKENDS", "backend", "predict", "update"]
+__all__ = ["KALMAN_BACKENDS", "backend", "predict", "smoother_record", "update"]
 
 #: values of ``FilterConfig.kalman``
 KALMAN_BACKENDS = ("compiled", "filterpy")
@@ -85,6 +85,33 @@ def update(x, P, z, R, H):
     x, P : the updated state and covariance (new arrays).
     """
     return _update(_f64(x), _f64(P), _f64(z), _f64(R), _f64(H))
+
+
+@njit(cache=True)
+def _smoother_record(Pp, H, R, z):
+    S = (H @ Pp) @ np.ascontiguousarray(H.T) + R
+    m, n = H.shape
+    B = np.empty((m, n + 1))
+    B[:, :n] = H
+    B[:, n] = z
+    Gs = np.linalg.solve(S, B)
+    G = np.ascontiguousarray(Gs[:, :n])
+    return (Pp @ np.ascontiguousarray(G.T)), G, np.ascontiguousarray(Gs[:, n])
+
+
+def smoother_record(Pp, H, R, z):
+    """The smoother's record of one update from the predicted covariance ``Pp``:
+    ``K = Pp H^T S^-1``, ``G = S^-1 H`` and ``s = S^-1 z`` with ``S = H Pp H^T + R``, from
+    one solve of ``S [H z]`` (LAPACK ``gesv``, as ``np.linalg.solve``), compiled: the
+    numpy form cost a stack, a solve and three products of Python overhead per epoch.
+
+    Returns
+    -------
+    K : (n, m) array
+    G : (m, n) array
+    s : (m,) array
+    """
+    return _smoother_record(_f64(Pp), _f64(H), _f64(R), _f64(z))
 
 
 def backend(name: str):
