@@ -364,11 +364,10 @@ def _sequential_rows(P, z, rd, m, x, Kt, s, u, k, nzn, nzc, nzv, n):
 
 
 @njit(cache=True)
-def _store_std_row(table, j, P, C, J, es, n):
+def _store_std_row(table, j, P, C, es, n):
     """Forward-table std columns (``STD_COLS``), parameter values are written by the caller,
     and parameter stds of row ``j`` from ``P`` (see :func:`.kernels.assemble_output`)."""
-    Pa = P[6:9, 6:9]
-    _euler_std(C, Pa, J, es)
+    _euler_std(C, P, 6, es)
     for i in range(6):
         table[j, 9 + i] = np.sqrt(max(P[i, i], 0.0))
     for i in range(3):
@@ -414,7 +413,6 @@ def dense_segment(model, dynamics, t, dth, dv, pos, vel, C, pnom, i_sg, i_sa, gm
     dthc = np.empty(3)
     dvc = np.empty(3)
     w_ib = np.empty(3)
-    J3 = np.empty((3, 3))
     es = np.empty(3)
     n_meas_max = 1
     for jj in range(j, n_t):
@@ -699,7 +697,7 @@ def dense_segment(model, dynamics, t, dth, dv, pos, vel, C, pnom, i_sg, i_sa, gm
         store_nav(table, j, pos, vel, C)
         for i in range(npar):
             table[j, 18 + i] = pnom[i]
-        _store_std_row(table, j, P, C, J3, es, n)
+        _store_std_row(table, j, P, C, es, n)
         seg[j] = -1 - h
         post[j] = True
         h += 1

@@ -413,34 +413,44 @@ def apply_feedback_into(pos, vel, C, pnom, x, work):
         pnom[i] -= x[9 + i]
 
 
-@njit(cache=True)
-def _euler_std(C, Pa, J, out):
-    """Std of roll, pitch, heading from the misalignment covariance ``Pa`` (3x3) at ``C``
-    (linearised: ``C_nom = (I + [phi x]) C``), written into ``out``; ``J`` is scratch (3x3)."""
+@njit(cache=True, inline="always")
+def _euler_std(C, P, o, out):
+    """Std of roll, pitch, heading from the misalignment covariance ``P[o:o+3, o:o+3]`` at
+    ``C`` (linearised: ``C_nom = (I + [phi x]) C``), written into ``out``.
+
+    The rows of the Jacobian ``J = d(roll, pitch, heading) / d phi`` are held in scalars and
+    its structural zeros (``J[0, 2] = J[1, 2] = 0``) skipped: the same sums in the same order
+    as ``J P J^T`` over all entries, without the products with zero, and no slice of ``P``
+    (inlined where it is called, once per IMU sample on the compiled high-rate path)."""
     # d roll = (C20 dC22 - C22 dC20) / (C20^2 + C22^2); dC = [phi x] C
     # dC20 = -phi_n C00 + phi_e C10 ; dC22 = -phi_n C02 + phi_e C12 ; dC21 = -phi_n C01 + phi_e C11
     d = C[2, 0] ** 2 + C[2, 2] ** 2
     if d < 1e-12:
         d = 1e-12
-    J[0, 0] = (C[2, 0] * C[1, 2] - C[2, 2] * C[1, 0]) / d
-    J[0, 1] = (-C[2, 0] * C[0, 2] + C[2, 2] * C[0, 0]) / d
-    J[0, 2] = 0.0
+    j00 = (C[2, 0] * C[1, 2] - C[2, 2] * C[1, 0]) / d
+    j01 = (-C[2, 0] * C[0, 2] + C[2, 2] * C[0, 0]) / d
     cp = np.sqrt(max(1.0 - C[2, 1] ** 2, 1e-12))
-    J[1, 0] = C[1, 1] / cp
-    J[1, 1] = -C[0, 1] / cp
-    J[1, 2] = 0.0
+    j10 = C[1, 1] / cp
+    j11 = -C[0, 1] / cp
     h = C[0, 1] ** 2 + C[1, 1] ** 2
     if h < 1e-12:
         h = 1e-12
-    J[2, 0] = C[0, 1] * C[2, 1] / h
-    J[2, 1] = C[1, 1] * C[2, 1] / h
-    J[2, 2] = -1.0
-    for r in range(3):
-        v = 0.0
-        for a in range(3):
-            for b in range(3):
-                v += J[r, a] * Pa[a, b] * J[r, b]
-        out[r] = np.sqrt(max(v, 0.0))
+    j20 = C[0, 1] * C[2, 1] / h
+    j21 = C[1, 1] * C[2, 1] / h
+    p00, p01, p02 = P[o, o], P[o, o + 1], P[o, o + 2]
+    p10, p11, p12 = P[o + 1, o], P[o + 1, o + 1], P[o + 1, o + 2]
+    p20, p21, p22 = P[o + 2, o], P[o + 2, o + 1], P[o + 2, o + 2]
+    v0 = 0.0 + j00 * p00 * j00 + j00 * p01 * j01
+    v0 = v0 + j01 * p10 * j00 + j01 * p11 * j01
+    v1 = 0.0 + j10 * p00 * j10 + j10 * p01 * j11
+    v1 = v1 + j11 * p10 * j10 + j11 * p11 * j11
+    # J[2, 2] = -1
+    v2 = (0.0 + j20 * p00 * j20 + j20 * p01 * j21 + j20 * p02 * -1.0
+          + j21 * p10 * j20 + j21 * p11 * j21 + j21 * p12 * -1.0
+          + -1.0 * p20 * j20 + -1.0 * p21 * j21 + -1.0 * p22 * -1.0)
+    out[0] = np.sqrt(max(v0, 0.0))
+    out[1] = np.sqrt(max(v1, 0.0))
+    out[2] = np.sqrt(max(v2, 0.0))
 
 
 @njit(cache=True)
@@ -478,7 +488,6 @@ def assemble_output(t, nav_in, out_seg, out_post, ep_t, P_start, P_end, X_start,
     Cc = np.empty((3, 3))
     R = np.empty((3, 3))
     phi = np.empty(3)
-    J = np.empty((3, 3))
     es = np.empty(3)
     n_nodes = ep_t.shape[0]
     for j in range(n_rows):
@@ -553,9 +562,9 @@ def assemble_output(t, nav_in, out_seg, out_post, ep_t, P_start, P_end, X_start,
             hd = np.arctan2(Cc[0, 1], Cc[1, 1])
             out[j, 8] = hd + 2.0 * np.pi if hd < 0.0 else hd
             if stds:
-                _euler_std(Cc, Pa, J, es)
+                _euler_std(Cc, Pa, 0, es)
         elif stds:
-            _euler_std(C, Pa, J, es)
+            _euler_std(C, Pa, 0, es)
         for i in range(npar):
             p_nom = nav_in[j, 18 + i] if hr else pnom_ep[ep, i]
             out[j, 18 + i] = p_nom - x[9 + i]

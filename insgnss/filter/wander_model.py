@@ -281,7 +281,6 @@ def _wander_output(t, nav, seg, post, ep_t, P0, P1, X0, X1, par, correct, out):
     R = np.empty((3, 3))
     Pb = np.empty((3, 3))
     Pa = np.empty((3, 3))
-    J = np.empty((3, 3))
     es = np.empty(3)
     phi = np.empty(3)
     ve = np.empty(3)
@@ -338,7 +337,7 @@ def _wander_output(t, nav, seg, post, ep_t, P0, P1, X0, X1, par, correct, out):
             if blk < 2:
                 for r in range(3):
                     out[j, 9 + o + r] = np.sqrt(max(Pa[r, r], 0.0))
-        kernels._euler_std(Cbl, Pa, J, es)
+        kernels._euler_std(Cbl, Pa, 0, es)
         for i in range(3):
             out[j, 15 + i] = es[i]
         for i in range(npar):
