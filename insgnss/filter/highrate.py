@@ -133,6 +133,12 @@ def _propagate_short15(P, F, Qd, A):
     ``F[6:9, 9:12] = -C dt``) through its 3x3 blocks: the same numbers as
     :func:`_first_order_propagation` at a fraction of its cost. ``A``: scratch (15, 15).
 
+    The bias rows of ``I + F`` are rows of the identity, so with ``A = (I + F) P`` only the
+    navigation rows 0-8 of ``A`` are formed, and for symmetric ``P`` the bias rows of the
+    result are the bias columns of ``A`` (``P'[b, i] = ((I + F) P[:, b])_i = A[i, b]``, the same
+    products in the same order) and its bias-bias block is ``P``'s: only the navigation rows
+    of ``A (I + F)^T`` are computed (9 of 15), then the navigation block is symmetrised.
+
     The 30 block entries of ``F`` and each column of ``P`` (row of ``A``) are read into
     tuples first: the compiler cannot tell that the arrays do not overlap, and with the values
     in registers it need not reload them after every store."""
@@ -141,7 +147,7 @@ def _propagate_short15(P, F, Qd, A):
     fb = (F[3, 12], F[3, 13], F[3, 14], F[4, 12], F[4, 13], F[4, 14], F[5, 12], F[5, 13],
           F[5, 14])
     fg = (F[6, 9], F[6, 10], F[6, 11], F[7, 9], F[7, 10], F[7, 11], F[8, 9], F[8, 10], F[8, 11])
-    for j in range(15):  # A = (I + F) P, row blocks of column j
+    for j in range(15):  # A[0:9] = rows 0-8 of (I + F) P, row blocks of column j
         p = (P[0, j], P[1, j], P[2, j], P[3, j], P[4, j], P[5, j], P[6, j], P[7, j], P[8, j],
              P[9, j], P[10, j], P[11, j], P[12, j], P[13, j], P[14, j])
         for i in range(3):
@@ -153,9 +159,7 @@ def _propagate_short15(P, F, Qd, A):
                 w += fg[3 * i + k] * p[9 + k]
             A[3 + i, j] = v
             A[6 + i, j] = w
-        for i in range(9, 15):
-            A[i, j] = p[i]
-    for j in range(15):  # P = A (I + F)^T, column blocks of row j (then symmetrised)
+    for j in range(9):  # rows 0-8 of P' = A (I + F)^T, column blocks of row j
         a = (A[j, 0], A[j, 1], A[j, 2], A[j, 3], A[j, 4], A[j, 5], A[j, 6], A[j, 7], A[j, 8],
              A[j, 9], A[j, 10], A[j, 11], A[j, 12], A[j, 13], A[j, 14])
         for i in range(3):
@@ -169,9 +173,19 @@ def _propagate_short15(P, F, Qd, A):
             P[j, 6 + i] = w
         for i in range(9, 15):
             P[j, i] = a[i]
-    for i in range(15):
-        for j in range(i + 1, 15):
+    for i in range(9):  # symmetrise the navigation block, mirror the navigation-bias block
+        for j in range(i + 1, 9):
             v = 0.5 * (P[i, j] + P[j, i]) + Qd[i, j]
+            P[i, j] = v
+            P[j, i] = v
+        for j in range(9, 15):
+            v = P[i, j] + Qd[i, j]
+            P[i, j] = v
+            P[j, i] = v
+        P[i, i] += Qd[i, i]
+    for i in range(9, 15):
+        for j in range(i + 1, 15):
+            v = P[i, j] + Qd[i, j]
             P[i, j] = v
             P[j, i] = v
         P[i, i] += Qd[i, i]
