@@ -62,6 +62,33 @@ from .linalg import _mm, cholesky_into, congruence_t, matvec_t, tri_solve
 __all__ = ["mbf_backward", "rts_error_state", "smooth"]
 
 
+@njit(cache=True, inline="always")
+def _adjoint_through_update(lam, lt, H_ptr, H_col, H_val, K, s, r0, r1, n):
+    """``lambda~ = lambda^ - H^T (S^-1 z + K^T lambda^)`` for the update rows r0 .. r1-1 (``H``
+    by its non-zeros): the adjoint part of :func:`_through_update`, inlined into the
+    per-sample loop of :func:`_hr_backward`."""
+    for i in range(n):
+        lt[i] = lam[i]
+    for r in range(r0, r1):
+        c = s[r]
+        for i in range(n):
+            c += K[r, i] * lam[i]
+        for q in range(H_ptr[r], H_ptr[r + 1]):
+            lt[H_col[q]] -= H_val[q] * c
+
+
+@njit(cache=True, inline="always")
+def _adjoint_back_sparse(lam, lt, hr_F, h, f_ptr, f_col, f_act, n):
+    """``lambda^ = Phi^T lambda~`` for ``Phi = I + F`` with F given at its pattern (values
+    ``hr_F[h]``): the adjoint part of :func:`_back_through_sparse`, inlined likewise."""
+    for i in range(n):
+        lam[i] = lt[i]
+    for a in range(f_act.shape[0]):
+        i = f_act[a]
+        for q in range(f_ptr[a], f_ptr[a + 1]):
+            lam[f_col[q]] += hr_F[h, q] * lt[i]
+
+
 @njit(cache=True)
 def _through_update(lam, lt, Lam, Lt, H_ptr, H_col, H_val, K, G, s, r0, r1, covariance, KL, W,
                     Hd, n=-1):
@@ -72,14 +99,7 @@ def _through_update(lam, lt, Lam, Lt, H_ptr, H_col, H_val, K, G, s, r0, r1, cova
     if n < 0:
         n = lam.shape[0]
     m = r1 - r0
-    for i in range(n):
-        lt[i] = lam[i]
-    for r in range(r0, r1):
-        c = s[r]
-        for i in range(n):
-            c += K[r, i] * lam[i]
-        for q in range(H_ptr[r], H_ptr[r + 1]):
-            lt[H_col[q]] -= H_val[q] * c
+    _adjoint_through_update(lam, lt, H_ptr, H_col, H_val, K, s, r0, r1, n)
     if not covariance:
         return
     for i in range(n):
@@ -119,19 +139,15 @@ def _through_update(lam, lt, Lam, Lt, H_ptr, H_col, H_val, K, G, s, r0, r1, cova
 
 
 @njit(cache=True)
-def _back_through_sparse(lam, lt, Lam, Lt, Fv, f_ptr, f_col, f_act, covariance, C1, n=-1):
+def _back_through_sparse(lam, lt, Lam, Lt, hr_F, h, f_ptr, f_col, f_act, covariance, C1, n=-1):
     """``lambda^ = Phi^T lambda~``, ``Lambda^ = Phi^T Lambda~ Phi`` for ``Phi = I + F`` with F
-    given at its pattern (values ``Fv``)."""
+    given at its pattern (values ``hr_F[h]``)."""
     if n < 0:
         n = lam.shape[0]
-    for i in range(n):
-        lam[i] = lt[i]
-    for a in range(f_act.shape[0]):
-        i = f_act[a]
-        for q in range(f_ptr[a], f_ptr[a + 1]):
-            lam[f_col[q]] += Fv[q] * lt[i]
+    _adjoint_back_sparse(lam, lt, hr_F, h, f_ptr, f_col, f_act, n)
     if not covariance:
         return
+    Fv = hr_F[h]
     for i in range(n):  # C1 = Lt F
         for j in range(n):
             C1[i, j] = 0.0
@@ -167,11 +183,18 @@ def _hr_backward(h0, h1, lam, lt, Lam, Lt, H_ptr, H_col, H_val, K, G, s, hr_r0, 
     """The adjoint back through the high-rate samples ``h1-1 .. h0``; ``LT[h - h0]`` keeps
     each ``lambda~``."""
     for h in range(h1 - 1, h0 - 1, -1):
-        _through_update(lam, lt, Lam, Lt, H_ptr, H_col, H_val, K, G, s, hr_r0[h], hr_r1[h],
-                        covariance, KL, W, Hd, n)
+        if covariance:
+            _through_update(lam, lt, Lam, Lt, H_ptr, H_col, H_val, K, G, s, hr_r0[h],
+                            hr_r1[h], covariance, KL, W, Hd, n)
+        else:  # the adjoint only (no call per sample: the foot INS's every IMU sample)
+            _adjoint_through_update(lam, lt, H_ptr, H_col, H_val, K, s, hr_r0[h], hr_r1[h], n)
         for i in range(n):
             LT[h - h0, i] = lt[i]
-        _back_through_sparse(lam, lt, Lam, Lt, hr_F[h], f_ptr, f_col, f_act, covariance, T1, n)
+        if covariance:
+            _back_through_sparse(lam, lt, Lam, Lt, hr_F, h, f_ptr, f_col, f_act, covariance,
+                                 T1, n)
+        else:
+            _adjoint_back_sparse(lam, lt, hr_F, h, f_ptr, f_col, f_act, n)
 
 
 @njit(cache=True)
