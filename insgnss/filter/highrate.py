@@ -65,13 +65,58 @@ OK, NONFINITE, NOT_PD, RUNAWAY, RECOVERED = 0, 1, 2, 3, 4
 
 
 @njit(cache=True)
-def _model_step(model, dynamics, pos, vel, C, pnom, dth_j, dv_j, a, dt_s, i_sg, i_sa, gmodel,
-                aupd, F, Qg, Qa, q_g, q_a, dyn, dthc, dvc, work):
+def _model_step(
+    model,
+    dynamics,
+    pos,
+    vel,
+    C,
+    pnom,
+    dth_j,
+    dv_j,
+    a,
+    dt_s,
+    i_sg,
+    i_sa,
+    gmodel,
+    aupd,
+    F,
+    Qg,
+    Qa,
+    q_g,
+    q_a,
+    dyn,
+    dthc,
+    dvc,
+    work,
+):
     """Advance the nominal of process model ``model`` over one IMU interval, adding ``F dt``
     and the noise integrals (model 0: LLF strapdown with error model ``dynamics``)."""
     if model == 0:
-        interval_step(pos, vel, C, pnom, dth_j, dv_j, a, dt_s, i_sg, i_sa, gmodel, aupd, F, Qg,
-                      Qa, q_g, q_a, dyn, dthc, dvc, work, dynamics)
+        interval_step(
+            pos,
+            vel,
+            C,
+            pnom,
+            dth_j,
+            dv_j,
+            a,
+            dt_s,
+            i_sg,
+            i_sa,
+            gmodel,
+            aupd,
+            F,
+            Qg,
+            Qa,
+            q_g,
+            q_a,
+            dyn,
+            dthc,
+            dvc,
+            work,
+            dynamics,
+        )
 
 
 @njit(cache=True)
@@ -144,12 +189,26 @@ def _propagate_short15(P, F, Qd, A):
     in registers it need not reload them after every store."""
     fp = (F[0, 3], F[1, 4], F[2, 5])
     fa = (F[3, 6], F[3, 7], F[3, 8], F[4, 6], F[4, 7], F[4, 8], F[5, 6], F[5, 7], F[5, 8])
-    fb = (F[3, 12], F[3, 13], F[3, 14], F[4, 12], F[4, 13], F[4, 14], F[5, 12], F[5, 13],
-          F[5, 14])
+    fb = (F[3, 12], F[3, 13], F[3, 14], F[4, 12], F[4, 13], F[4, 14], F[5, 12], F[5, 13], F[5, 14])
     fg = (F[6, 9], F[6, 10], F[6, 11], F[7, 9], F[7, 10], F[7, 11], F[8, 9], F[8, 10], F[8, 11])
     for j in range(15):  # A[0:9] = rows 0-8 of (I + F) P, row blocks of column j
-        p = (P[0, j], P[1, j], P[2, j], P[3, j], P[4, j], P[5, j], P[6, j], P[7, j], P[8, j],
-             P[9, j], P[10, j], P[11, j], P[12, j], P[13, j], P[14, j])
+        p = (
+            P[0, j],
+            P[1, j],
+            P[2, j],
+            P[3, j],
+            P[4, j],
+            P[5, j],
+            P[6, j],
+            P[7, j],
+            P[8, j],
+            P[9, j],
+            P[10, j],
+            P[11, j],
+            P[12, j],
+            P[13, j],
+            P[14, j],
+        )
         for i in range(3):
             A[i, j] = p[i] + fp[i] * p[3 + i]
             v = p[3 + i]
@@ -160,8 +219,23 @@ def _propagate_short15(P, F, Qd, A):
             A[3 + i, j] = v
             A[6 + i, j] = w
     for j in range(9):  # rows 0-8 of P' = A (I + F)^T, column blocks of row j
-        a = (A[j, 0], A[j, 1], A[j, 2], A[j, 3], A[j, 4], A[j, 5], A[j, 6], A[j, 7], A[j, 8],
-             A[j, 9], A[j, 10], A[j, 11], A[j, 12], A[j, 13], A[j, 14])
+        a = (
+            A[j, 0],
+            A[j, 1],
+            A[j, 2],
+            A[j, 3],
+            A[j, 4],
+            A[j, 5],
+            A[j, 6],
+            A[j, 7],
+            A[j, 8],
+            A[j, 9],
+            A[j, 10],
+            A[j, 11],
+            A[j, 12],
+            A[j, 13],
+            A[j, 14],
+        )
         for i in range(3):
             P[j, i] = a[i] + fp[i] * a[3 + i]
             v = a[3 + i]
@@ -392,14 +466,92 @@ def _store_std_row(table, j, P, C, es, n):
 
 
 @njit(cache=True)
-def dense_segment(model, dynamics, t, dth, dv, pos, vel, C, pnom, i_sg, i_sa, gmodel, aupd, q_g,
-                  q_a, dyn, decay, qdiag, Fx, Qx, table, seg, post, rates, f_ptr, f_col, f_act,
-                  q_row, q_col, j, frac, t_end, P, hr0, hr_t, hr_row, hr_F, hr_Q, hr_fb, hr_r0,
-                  hr_r1, hr_ppi, pp_out, H_ptr, H_col, H_val, Ks, Gs, ss, row, store_G, hr_ptr,
-                  hr_m, hr_r, kinds, ips, fps, vptr, vals, stds, tids, thrs, gyro_psd, streak,
-                  recovery, n_nav, check,
-                  rw_on, rw_t, rw_v, rw_state, rw_scratch, rw_window, rw_min, rw_bound, lg_t,
-                  lg_tid, lg_dof, lg_nis, lg_thr, lg_flags, lg_z, lg_s, status):
+def dense_segment(
+    model,
+    dynamics,
+    t,
+    dth,
+    dv,
+    pos,
+    vel,
+    C,
+    pnom,
+    i_sg,
+    i_sa,
+    gmodel,
+    aupd,
+    q_g,
+    q_a,
+    dyn,
+    decay,
+    qdiag,
+    Fx,
+    Qx,
+    table,
+    seg,
+    post,
+    rates,
+    f_ptr,
+    f_col,
+    f_act,
+    q_row,
+    q_col,
+    j,
+    frac,
+    t_end,
+    P,
+    hr0,
+    hr_t,
+    hr_row,
+    hr_F,
+    hr_Q,
+    hr_fb,
+    hr_r0,
+    hr_r1,
+    hr_ppi,
+    pp_out,
+    H_ptr,
+    H_col,
+    H_val,
+    Ks,
+    Gs,
+    ss,
+    row,
+    store_G,
+    hr_ptr,
+    hr_m,
+    hr_r,
+    kinds,
+    ips,
+    fps,
+    vptr,
+    vals,
+    stds,
+    tids,
+    thrs,
+    gyro_psd,
+    streak,
+    recovery,
+    n_nav,
+    check,
+    rw_on,
+    rw_t,
+    rw_v,
+    rw_state,
+    rw_scratch,
+    rw_window,
+    rw_min,
+    rw_bound,
+    lg_t,
+    lg_tid,
+    lg_dof,
+    lg_nis,
+    lg_thr,
+    lg_flags,
+    lg_z,
+    lg_s,
+    status,
+):
     """Run the IMU rows ``j ..`` with ``t[j] <= t_end`` of a dense segment (module docstring):
     one high-rate sample per row, written at ``hr0, hr0 + 1, ...`` of the high-rate arrays of
     the store (:class:`insgnss.filter.store.NodeStore`); update rows from ``row`` (``H`` by its
@@ -488,8 +640,31 @@ def dense_segment(model, dynamics, t, dth, dv, pos, vel, C, pnom, i_sg, i_sa, gm
             for c in range(3):
                 Qg[i, c] = 0.0
                 Qa[i, c] = 0.0
-        _model_step(model, dynamics, pos, vel, C, pnom, dth[j], dv[j], a, dt_s, i_sg, i_sa,
-                    gmodel, aupd, F, Qg, Qa, q_g, q_a, dyn, dthc, dvc, work)
+        _model_step(
+            model,
+            dynamics,
+            pos,
+            vel,
+            C,
+            pnom,
+            dth[j],
+            dv[j],
+            a,
+            dt_s,
+            i_sg,
+            i_sa,
+            gmodel,
+            aupd,
+            F,
+            Qg,
+            Qa,
+            q_g,
+            q_a,
+            dyn,
+            dthc,
+            dvc,
+            work,
+        )
         for i in range(3):
             w_ib[i] = dthc[i] / dt_s if dt_s > 0.0 else 0.0
             rates[0, i] = rates[1, i] = w_ib[i]
@@ -545,9 +720,23 @@ def dense_segment(model, dynamics, t, dth, dv, pos, vel, C, pnom, i_sg, i_sa, gm
             mi = hr_m[e]
             vr = vptr[mi] + hr_r[e]
             window = dt_s if ips[mi, 7] == 1 else 0.0
-            d = evaluate_compiled(kinds[mi], ips[mi], fps[mi], vals[vr], stds[vr], vel, C,
-                                  pos[0], w_ib, window, gyro_psd, pnom, zk[m_tot:],
-                                  Hk[m_tot:], Rk[m_tot:, m_tot:])
+            d = evaluate_compiled(
+                kinds[mi],
+                ips[mi],
+                fps[mi],
+                vals[vr],
+                stds[vr],
+                vel,
+                C,
+                pos[0],
+                w_ib,
+                window,
+                gyro_psd,
+                pnom,
+                zk[m_tot:],
+                Hk[m_tot:],
+                Rk[m_tot:, m_tot:],
+            )
             if d == 0:
                 continue
             for p in range(m_tot):  # zero the off-diagonal blocks of R
@@ -595,8 +784,9 @@ def dense_segment(model, dynamics, t, dth, dv, pos, vel, C, pnom, i_sg, i_sa, gm
                 nis = gating.nis_into(S[o0:o1, o0:o1], zd, Ln, wn)
             tid = tids[mi]
             if rw_on:
-                med = health.runaway_push(rw_t, rw_v, rw_state, tid, t[j], nis / d, rw_window,
-                                          rw_min, rw_bound, rw_scratch)
+                med = health.runaway_push(
+                    rw_t, rw_v, rw_state, tid, t[j], nis / d, rw_window, rw_min, rw_bound, rw_scratch
+                )
                 if med >= 0.0:
                     code = RUNAWAY
                     fail_t, fail_v, fail_tid = t[j], med, tid
@@ -660,11 +850,9 @@ def dense_segment(model, dynamics, t, dth, dv, pos, vel, C, pnom, i_sg, i_sa, gm
             if seq and m_acc < m_tot:
                 row_pattern(Hk, m_acc, n, nz_n, nz_c, nz_v)
             if seq and n == 15:  # the constant dimension lets LLVM unroll the loops
-                ok = _sequential_rows(P, zk, rd, m_acc, x, Kt, sv, u_s, k_s, nz_n, nz_c, nz_v,
-                                      15)
+                ok = _sequential_rows(P, zk, rd, m_acc, x, Kt, sv, u_s, k_s, nz_n, nz_c, nz_v, 15)
             elif seq:
-                ok = _sequential_rows(P, zk, rd, m_acc, x, Kt, sv, u_s, k_s, nz_n, nz_c, nz_v,
-                                      n)
+                ok = _sequential_rows(P, zk, rd, m_acc, x, Kt, sv, u_s, k_s, nz_n, nz_c, nz_v, n)
             elif n == 15:
                 ok = _kalman_update(P, Hk, zk, m_acc, HP, S, x, Kt, G, sv, L, W, V, store_G, 15)
             else:
@@ -731,18 +919,24 @@ class HighRate:
 
     def __init__(self, measurements: list[Measurement], model, run):
         if not model.high_rate:
-            raise ConfigError(f"the {type(model).__name__} process model has no compiled "
-                              "high-rate path; build the measurements with high_rate=False",
-                              column="measurements", found=[repr(m) for m in measurements])
+            raise ConfigError(
+                f"the {type(model).__name__} process model has no compiled "
+                "high-rate path; build the measurements with high_rate=False",
+                column="measurements",
+                found=[repr(m) for m in measurements],
+            )
         layout = model.layout
         specs = []
         for m in measurements:
             spec = m.compiled(layout)
             base = next((c for c in type(m).__mro__ if "compiled" in c.__dict__), None)
             if spec is None or (base is not None and type(m).evaluate is not base.evaluate):
-                raise ConfigError(f"{type(m).__name__} has no compiled implementation (its "
-                                  "evaluate() is Python); use high_rate=False",
-                                  column="measurements", found=repr(m))
+                raise ConfigError(
+                    f"{type(m).__name__} has no compiled implementation (its "
+                    "evaluate() is Python); use high_rate=False",
+                    column="measurements",
+                    found=repr(m),
+                )
             specs.append(spec)
         self.model, self.run = model, run
         k = len(specs)
@@ -757,15 +951,21 @@ class HighRate:
         # the thresholds come from the engine's gate table (3 dof for ZUPT/ZARU, the number of
         # constrained axes for body velocity)
         dofs = [3 if s.kind != 2 else int(s.ip[0]) for s in specs]
-        self.thrs = np.array([run.gates.threshold(run.gates.probability(m), d)
-                              for m, d in zip(measurements, dofs, strict=True)], float)
+        self.thrs = np.array(
+            [
+                run.gates.threshold(run.gates.probability(m), d)
+                for m, d in zip(measurements, dofs, strict=True)
+            ],
+            float,
+        )
         self.gyro_psd = np.asarray(model.noise.gyro_psd, float)
         # most non-zeros of H an event of each measurement stores: a ZUPT row selects one
         # velocity state, a ZARU row a gyro bias and the three attitude states; a body-velocity
         # row may touch every state
         n = layout.n
-        self.nz_bound = np.array([3 if s.kind == ZUPT else 12 if s.kind == ZARU else 3 * n
-                                  for s in specs], np.int64)
+        self.nz_bound = np.array(
+            [3 if s.kind == ZUPT else 12 if s.kind == ZARU else 3 * n for s in specs], np.int64
+        )
         self.pattern = model.f_pattern()
 
     def segment(self, t_end: float, P: np.ndarray) -> np.ndarray:
@@ -777,12 +977,19 @@ class HighRate:
         j0 = model.j
         j1 = int(np.searchsorted(t, t_end, side="right"))
         n_ev = int(sched.hr_ptr[j1] - sched.hr_ptr[j0])
-        store.reserve_rows(3 * n_ev, int(self.nz_bound[sched.hr_m[sched.hr_ptr[j0]:
-                                                                  sched.hr_ptr[j1]]].sum()))
-        lg = {"time": np.empty(n_ev), "tid": np.empty(n_ev, np.int64),
-              "dof": np.empty(n_ev, np.int64), "nis": np.empty(n_ev),
-              "threshold": np.empty(n_ev), "flags": np.zeros((n_ev, 2), np.bool_),
-              "innov": np.empty((n_ev, 3)), "innov_std": np.empty((n_ev, 3))}
+        store.reserve_rows(
+            3 * n_ev, int(self.nz_bound[sched.hr_m[sched.hr_ptr[j0] : sched.hr_ptr[j1]]].sum())
+        )
+        lg = {
+            "time": np.empty(n_ev),
+            "tid": np.empty(n_ev, np.int64),
+            "dof": np.empty(n_ev, np.int64),
+            "nis": np.empty(n_ev),
+            "threshold": np.empty(n_ev),
+            "flags": np.zeros((n_ev, 2), np.bool_),
+            "innov": np.empty((n_ev, 3)),
+            "innov_std": np.empty((n_ev, 3)),
+        }
         status = np.zeros(4, np.int64)
         rw = run.runaway
         P = np.array(P, dtype=float, order="C")
@@ -792,21 +999,66 @@ class HighRate:
             c0 = _time.perf_counter()
             h0 = store.hr_count
             j, frac, fail_t, fail_v, fail_tid = dense_segment(
-                *model.high_rate_args(), *self.pattern, model.j, model.frac, t_end, P, h0,
-                store.hr_t, store.hr_row, store.hr_F, store.hr_Q, store.hr_fb, store.hr_r0,
-                store.hr_r1, store.hr_ppi, pp_out, store.H_ptr, store.H_col, store.H_val,
-                store.K, store.G, store.s,
-                store.n_rows, bool(run.config.smoother_covariance),
-                sched.hr_ptr, sched.hr_m, sched.hr_r, self.kinds, self.ips, self.fps, self.vptr,
-                self.vals, self.stds, self.tids, self.thrs, self.gyro_psd,
-                run.streak, run.recovery, model.n_nav, run.check, rw.enabled, rw.buf_t,
-                rw.buf_v, rw.state, rw.scratch, rw.window, rw.min_count, rw.bound,
-                lg["time"][n_log:], lg["tid"][n_log:], lg["dof"][n_log:], lg["nis"][n_log:],
-                lg["threshold"][n_log:], lg["flags"][n_log:], lg["innov"][n_log:],
-                lg["innov_std"][n_log:], status)
+                *model.high_rate_args(),
+                *self.pattern,
+                model.j,
+                model.frac,
+                t_end,
+                P,
+                h0,
+                store.hr_t,
+                store.hr_row,
+                store.hr_F,
+                store.hr_Q,
+                store.hr_fb,
+                store.hr_r0,
+                store.hr_r1,
+                store.hr_ppi,
+                pp_out,
+                store.H_ptr,
+                store.H_col,
+                store.H_val,
+                store.K,
+                store.G,
+                store.s,
+                store.n_rows,
+                bool(run.config.smoother_covariance),
+                sched.hr_ptr,
+                sched.hr_m,
+                sched.hr_r,
+                self.kinds,
+                self.ips,
+                self.fps,
+                self.vptr,
+                self.vals,
+                self.stds,
+                self.tids,
+                self.thrs,
+                self.gyro_psd,
+                run.streak,
+                run.recovery,
+                model.n_nav,
+                run.check,
+                rw.enabled,
+                rw.buf_t,
+                rw.buf_v,
+                rw.state,
+                rw.scratch,
+                rw.window,
+                rw.min_count,
+                rw.bound,
+                lg["time"][n_log:],
+                lg["tid"][n_log:],
+                lg["dof"][n_log:],
+                lg["nis"][n_log:],
+                lg["threshold"][n_log:],
+                lg["flags"][n_log:],
+                lg["innov"][n_log:],
+                lg["innov_std"][n_log:],
+                status,
+            )
             code, n_s, n_rows, n_new = (int(v) for v in status)
-            run.timing["high_rate"] = (run.timing.get("high_rate", 0.0)
-                                       + _time.perf_counter() - c0)
+            run.timing["high_rate"] = run.timing.get("high_rate", 0.0) + _time.perf_counter() - c0
             n_log += n_new
             if n_s:
                 model.j, model.frac = j, frac
@@ -816,18 +1068,29 @@ class HighRate:
             if code != RECOVERED:
                 break
             store.add_hr_predicted(h0 + n_s - 1, pp_out)
-        run.log.add_block({"time": lg["time"][:n_log], "tid": lg["tid"][:n_log],
-                           "dof": lg["dof"][:n_log], "nis": lg["nis"][:n_log],
-                           "threshold": lg["threshold"][:n_log],
-                           "accepted": lg["flags"][:n_log, 0].copy(),
-                           "recovered": lg["flags"][:n_log, 1].copy(),
-                           "innov": lg["innov"][:n_log], "innov_std": lg["innov_std"][:n_log]})
+        run.log.add_block(
+            {
+                "time": lg["time"][:n_log],
+                "tid": lg["tid"][:n_log],
+                "dof": lg["dof"][:n_log],
+                "nis": lg["nis"][:n_log],
+                "threshold": lg["threshold"][:n_log],
+                "accepted": lg["flags"][:n_log, 0].copy(),
+                "recovered": lg["flags"][:n_log, 1].copy(),
+                "innov": lg["innov"][:n_log],
+                "innov_std": lg["innov_std"][:n_log],
+            }
+        )
         if code == NONFINITE:
-            raise FilterHealthError(f"filter state became non-finite at t = {fail_t:.6f} s "
-                                    "(high-rate propagation)", found="NaN/inf in P or nominal")
+            raise FilterHealthError(
+                f"filter state became non-finite at t = {fail_t:.6f} s (high-rate propagation)",
+                found="NaN/inf in P or nominal",
+            )
         if code == NOT_PD:
-            raise FilterHealthError(f"covariance is not positive definite at t = {fail_t:.6f} s "
-                                    "(high-rate path)", found="Cholesky factorisation failed")
+            raise FilterHealthError(
+                f"covariance is not positive definite at t = {fail_t:.6f} s (high-rate path)",
+                found="Cholesky factorisation failed",
+            )
         if code == RUNAWAY:
             raise rw.error(int(fail_tid), run.log.names[int(fail_tid)], fail_t, fail_v)
         return P

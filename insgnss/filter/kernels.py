@@ -57,9 +57,33 @@ _euler_dcm = euler_to_dcm_nb  # one compiled implementation (insgnss.attitude)
 
 
 @njit(cache=True)
-def interval_step(pos, vel, C, pnom, dth_j, dv_j, a, dt_s, i_sg, i_sa, gravity_model,
-                  attitude_update, F, Qg, Qa, q_g, q_a, dyn, dthc, dvc, work, dynamics=0,
-                  Cne=None, hv=None, Cbe=None):
+def interval_step(
+    pos,
+    vel,
+    C,
+    pnom,
+    dth_j,
+    dv_j,
+    a,
+    dt_s,
+    i_sg,
+    i_sa,
+    gravity_model,
+    attitude_update,
+    F,
+    Qg,
+    Qa,
+    q_g,
+    q_a,
+    dyn,
+    dthc,
+    dvc,
+    work,
+    dynamics=0,
+    Cne=None,
+    hv=None,
+    Cbe=None,
+):
     """One IMU interval (share ``a`` of row ``dth_j, dv_j``, duration ``dt_s``) of the strapdown
     process model: compensate the increments with the nominal biases (and scale factors) in
     ``pnom``, add ``F dt`` (``dynamics`` 0: :func:`.models.accumulate_error_dynamics`, 1: the
@@ -107,8 +131,7 @@ def interval_step(pos, vel, C, pnom, dth_j, dv_j, a, dt_s, i_sg, i_sa, gravity_m
         if Cne is None:
             du -= gravity_somigliana(pos[0], pos[2]) * dt_s
         else:  # minus g^e dt = +g u dt, u = C_w^e[:, 2]
-            gdt = normal_gravity_sc(Cne[2, 2], np.sqrt(Cne[2, 0] ** 2 + Cne[2, 1] ** 2), hv[0],
-                                    0) * dt_s
+            gdt = normal_gravity_sc(Cne[2, 2], np.sqrt(Cne[2, 0] ** 2 + Cne[2, 1] ** 2), hv[0], 0) * dt_s
             de -= gdt * Cne[0, 2]
             dn -= gdt * Cne[1, 2]
             du -= gdt * Cne[2, 2]
@@ -132,18 +155,42 @@ def interval_step(pos, vel, C, pnom, dth_j, dv_j, a, dt_s, i_sg, i_sa, gravity_m
     # with the free mechanization, instead of a second specialisation for the constant
     fix_height = np.bool_(False)
     if Cne is None:
-        strapdown_step(pos, vel, C, dthc, dvc, dt_s, gravity_model, attitude_update, fix_height,
-                       work)
+        strapdown_step(pos, vel, C, dthc, dvc, dt_s, gravity_model, attitude_update, fix_height, work)
     else:
-        wander_step(Cne, hv, vel, C, dthc, dvc, dt_s, gravity_model, attitude_update, fix_height,
-                    work)
+        wander_step(Cne, hv, vel, C, dthc, dvc, dt_s, gravity_model, attitude_update, fix_height, work)
 
 
 @njit(cache=True)
-def propagate_nominal(t, dth, dv, j, frac, t_end, pos, vel, C, pnom, i_sg, i_sa,
-                      gravity_model, attitude_update, sub_T, Fint, Qint, sub_dt, q_g, q_a,
-                      nav_out, out_seg, seg_id, rates, dyn=None, dynamics=0, Cne=None,
-                      hv=None):
+def propagate_nominal(
+    t,
+    dth,
+    dv,
+    j,
+    frac,
+    t_end,
+    pos,
+    vel,
+    C,
+    pnom,
+    i_sg,
+    i_sa,
+    gravity_model,
+    attitude_update,
+    sub_T,
+    Fint,
+    Qint,
+    sub_dt,
+    q_g,
+    q_a,
+    nav_out,
+    out_seg,
+    seg_id,
+    rates,
+    dyn=None,
+    dynamics=0,
+    Cne=None,
+    hv=None,
+):
     """Mechanize from the current point (row ``j``, share ``frac`` consumed) to ``t_end``.
 
     The nominal state ``pos, vel, C`` is advanced in place using the increments compensated
@@ -204,9 +251,33 @@ def propagate_nominal(t, dth, dv, j, frac, t_end, pos, vel, C, pnom, i_sg, i_sa,
                         Qint[s, r, c, k] = 0.0
             sub_dt[s] = 0.0
             acc = 0.0
-        interval_step(pos, vel, C, pnom, dth[j], dv[j], a, dt_s, i_sg, i_sa, gravity_model,
-                      attitude_update, Fint[s], Qint[s, 0], Qint[s, 1], q_g, q_a, dyn_k, dthc,
-                      dvc, work, dynamics, Cne, hv, Cbe)
+        interval_step(
+            pos,
+            vel,
+            C,
+            pnom,
+            dth[j],
+            dv[j],
+            a,
+            dt_s,
+            i_sg,
+            i_sa,
+            gravity_model,
+            attitude_update,
+            Fint[s],
+            Qint[s, 0],
+            Qint[s, 1],
+            q_g,
+            q_a,
+            dyn_k,
+            dthc,
+            dvc,
+            work,
+            dynamics,
+            Cne,
+            hv,
+            Cbe,
+        )
         sub_dt[s] += dt_s
         acc += dt_s
         for i in range(3):
@@ -275,8 +346,7 @@ def expm_nb(A):
 
 
 @njit(cache=True)
-def discretize(Fint, Qint, sub_dt, n_sub, decay, qdiag, method, Phi_tot, Qd_tot, Fx=None,
-               Qx=None):
+def discretize(Fint, Qint, sub_dt, n_sub, decay, qdiag, method, Phi_tot, Qd_tot, Fx=None, Qx=None):
     """Transition matrix and process noise of a segment from its covariance sub-intervals.
 
     For each sub-interval of duration T with ``FT = int F dt - diag(decay) T (+ Fx T)`` and
@@ -355,8 +425,9 @@ def discretize(Fint, Qint, sub_dt, n_sub, decay, qdiag, method, Phi_tot, Qd_tot,
             _mmspt(A, ri, ci, vals, nf, Cq)  # Cq = FT QT FT^T
             for r in range(n):
                 for c in range(n):
-                    Qd[r, c] = (QT[r, c] + 0.5 * (A[r, c] + A[c, r])
-                                + (B[r, c] + B[c, r] + 2.0 * Cq[r, c]) / 6.0)
+                    Qd[r, c] = (
+                        QT[r, c] + 0.5 * (A[r, c] + A[c, r]) + (B[r, c] + B[c, r] + 2.0 * Cq[r, c]) / 6.0
+                    )
         for r in range(n):
             for c in range(r + 1, n):
                 v = 0.5 * (Qd[r, c] + Qd[c, r])
@@ -445,17 +516,42 @@ def _euler_std(C, P, o, out):
     v1 = 0.0 + j10 * p00 * j10 + j10 * p01 * j11
     v1 = v1 + j11 * p10 * j10 + j11 * p11 * j11
     # J[2, 2] = -1
-    v2 = (0.0 + j20 * p00 * j20 + j20 * p01 * j21 + j20 * p02 * -1.0
-          + j21 * p10 * j20 + j21 * p11 * j21 + j21 * p12 * -1.0
-          + -1.0 * p20 * j20 + -1.0 * p21 * j21 + -1.0 * p22 * -1.0)
+    v2 = (
+        0.0
+        + j20 * p00 * j20
+        + j20 * p01 * j21
+        + j20 * p02 * -1.0
+        + j21 * p10 * j20
+        + j21 * p11 * j21
+        + j21 * p12 * -1.0
+        + -1.0 * p20 * j20
+        + -1.0 * p21 * j21
+        + -1.0 * p22 * -1.0
+    )
     out[0] = np.sqrt(max(v0, 0.0))
     out[1] = np.sqrt(max(v1, 0.0))
     out[2] = np.sqrt(max(v2, 0.0))
 
 
 @njit(cache=True)
-def assemble_output(t, nav_in, out_seg, out_post, ep_t, P_start, P_end, X_start, X_end, pnom_ep,
-                    n_rows, correct, out, X_hr, hr_node, stds=True):
+def assemble_output(
+    t,
+    nav_in,
+    out_seg,
+    out_post,
+    ep_t,
+    P_start,
+    P_end,
+    X_start,
+    X_end,
+    pnom_ep,
+    n_rows,
+    correct,
+    out,
+    X_hr,
+    hr_node,
+    stds=True,
+):
     """IMU-rate output rows: nominal (optionally corrected) navigation state, stds, parameters.
 
     ``nav_in[j, 0:9]`` is the stored forward nominal (NAV_COLS). Sample ``j`` belongs to
@@ -515,8 +611,7 @@ def assemble_output(t, nav_in, out_seg, out_post, ep_t, P_start, P_end, X_start,
                     pdiag[a] = (1.0 - w) * P_start[e - 1, a, a] + w * P_end[e, a, a]
                 for a in range(3):
                     for b in range(3):
-                        Pa[a, b] = ((1.0 - w) * P_start[e - 1, 6 + a, 6 + b]
-                                    + w * P_end[e, 6 + a, 6 + b])
+                        Pa[a, b] = (1.0 - w) * P_start[e - 1, 6 + a, 6 + b] + w * P_end[e, 6 + a, 6 + b]
             ep = -1
         elif out_post[j]:
             for a in range(n):
@@ -539,8 +634,7 @@ def assemble_output(t, nav_in, out_seg, out_post, ep_t, P_start, P_end, X_start,
             if stds:
                 for a in range(3):
                     for b in range(3):
-                        Pa[a, b] = ((1.0 - w) * P_start[e - 1, 6 + a, 6 + b]
-                                    + w * P_end[e, 6 + a, 6 + b])
+                        Pa[a, b] = (1.0 - w) * P_start[e - 1, 6 + a, 6 + b] + w * P_end[e, 6 + a, 6 + b]
             ep = e - 1
         _euler_dcm(nav_in[j, 6], nav_in[j, 7], nav_in[j, 8], C)
         if correct:

@@ -90,8 +90,7 @@ def _adjoint_back_sparse(lam, lt, hr_F, h, f_ptr, f_col, f_act, n):
 
 
 @njit(cache=True)
-def _through_update(lam, lt, Lam, Lt, H_ptr, H_col, H_val, K, G, s, r0, r1, covariance, KL, W,
-                    Hd, n=-1):
+def _through_update(lam, lt, Lam, Lt, H_ptr, H_col, H_val, K, G, s, r0, r1, covariance, KL, W, Hd, n=-1):
     """``lambda~ = lambda^ - H^T (S^-1 z + K^T lambda^)`` and (``covariance``)
     ``Lambda~ = H^T S^-1 H + (I - K H)^T Lambda^ (I - K H)`` for the update rows r0 .. r1-1
     (``H`` by its non-zeros, :mod:`.store`: ``H^T c`` touches only them; the covariance
@@ -178,28 +177,54 @@ def _back_through_dense(lam, lt, Lam, Lt, F, covariance, T1):
 
 
 @njit(cache=True)
-def _hr_backward(h0, h1, lam, lt, Lam, Lt, H_ptr, H_col, H_val, K, G, s, hr_r0, hr_r1, hr_F,
-                 f_ptr, f_col, f_act, covariance, KL, W, Hd, T1, LT, n):
+def _hr_backward(
+    h0,
+    h1,
+    lam,
+    lt,
+    Lam,
+    Lt,
+    H_ptr,
+    H_col,
+    H_val,
+    K,
+    G,
+    s,
+    hr_r0,
+    hr_r1,
+    hr_F,
+    f_ptr,
+    f_col,
+    f_act,
+    covariance,
+    KL,
+    W,
+    Hd,
+    T1,
+    LT,
+    n,
+):
     """The adjoint back through the high-rate samples ``h1-1 .. h0``; ``LT[h - h0]`` keeps
     each ``lambda~``."""
     for h in range(h1 - 1, h0 - 1, -1):
         if covariance:
-            _through_update(lam, lt, Lam, Lt, H_ptr, H_col, H_val, K, G, s, hr_r0[h],
-                            hr_r1[h], covariance, KL, W, Hd, n)
+            _through_update(
+                lam, lt, Lam, Lt, H_ptr, H_col, H_val, K, G, s, hr_r0[h], hr_r1[h], covariance, KL, W, Hd, n
+            )
         else:  # the adjoint only (no call per sample: the foot INS's every IMU sample)
             _adjoint_through_update(lam, lt, H_ptr, H_col, H_val, K, s, hr_r0[h], hr_r1[h], n)
         for i in range(n):
             LT[h - h0, i] = lt[i]
         if covariance:
-            _back_through_sparse(lam, lt, Lam, Lt, hr_F, h, f_ptr, f_col, f_act, covariance,
-                                 T1, n)
+            _back_through_sparse(lam, lt, Lam, Lt, hr_F, h, f_ptr, f_col, f_act, covariance, T1, n)
         else:
             _adjoint_back_sparse(lam, lt, hr_F, h, f_ptr, f_col, f_act, n)
 
 
 @njit(cache=True)
-def _hr_forward(x, h0, h1, hr_F, hr_Q, hr_fb, hr_ppi, hr_Pp, LT, f_ptr, f_col, f_act, q_row,
-                q_col, xs_hr, xm, n):
+def _hr_forward(
+    x, h0, h1, hr_F, hr_Q, hr_fb, hr_ppi, hr_Pp, LT, f_ptr, f_col, f_act, q_row, q_col, xs_hr, xm, n
+):
     """The smoothed errors of the high-rate samples ``h0 .. h1-1`` rebuilt forwards from
     ``x`` (the smoothed error after the node before them; overwritten)."""
     for h in range(h0, h1):
@@ -226,21 +251,116 @@ def _hr_forward(x, h0, h1, hr_F, hr_Q, hr_fb, hr_ppi, hr_Pp, LT, f_ptr, f_col, f
 
 
 @njit(cache=True)
-def _mbf_backward15(Pf, Phi, fb, r0, r1, H_ptr, H_col, H_val, K, G, s, n_nodes, seg0, seg1,
-                    n_hr, hr_F, hr_Q, hr_fb, hr_r0, hr_r1, hr_ppi, hr_Pp, f_ptr, f_col, f_act, q_row, q_col,
-                    covariance, xs_plus, xs_minus, Ps, xs_hr):
+def _mbf_backward15(
+    Pf,
+    Phi,
+    fb,
+    r0,
+    r1,
+    H_ptr,
+    H_col,
+    H_val,
+    K,
+    G,
+    s,
+    n_nodes,
+    seg0,
+    seg1,
+    n_hr,
+    hr_F,
+    hr_Q,
+    hr_fb,
+    hr_r0,
+    hr_r1,
+    hr_ppi,
+    hr_Pp,
+    f_ptr,
+    f_col,
+    f_act,
+    q_row,
+    q_col,
+    covariance,
+    xs_plus,
+    xs_minus,
+    Ps,
+    xs_hr,
+):
     """:func:`mbf_backward` of the 15-state model with the dimension a compile-time constant,
     so that LLVM unrolls the per-sample loops (a separate entry point: a job compiles only the
     specialisation it runs, :func:`smooth` picks it)."""
-    mbf_backward(Pf, Phi, fb, r0, r1, H_ptr, H_col, H_val, K, G, s, n_nodes, seg0, seg1, n_hr,
-                 hr_F, hr_Q, hr_fb, hr_r0, hr_r1, hr_ppi, hr_Pp, f_ptr, f_col, f_act, q_row,
-                 q_col, covariance, xs_plus, xs_minus, Ps, xs_hr, 15)
+    mbf_backward(
+        Pf,
+        Phi,
+        fb,
+        r0,
+        r1,
+        H_ptr,
+        H_col,
+        H_val,
+        K,
+        G,
+        s,
+        n_nodes,
+        seg0,
+        seg1,
+        n_hr,
+        hr_F,
+        hr_Q,
+        hr_fb,
+        hr_r0,
+        hr_r1,
+        hr_ppi,
+        hr_Pp,
+        f_ptr,
+        f_col,
+        f_act,
+        q_row,
+        q_col,
+        covariance,
+        xs_plus,
+        xs_minus,
+        Ps,
+        xs_hr,
+        15,
+    )
 
 
 @njit(cache=True)
-def mbf_backward(Pf, Phi, fb, r0, r1, H_ptr, H_col, H_val, K, G, s, n_nodes, seg0, seg1, n_hr,
-                 hr_F, hr_Q, hr_fb, hr_r0, hr_r1, hr_ppi, hr_Pp, f_ptr, f_col, f_act, q_row, q_col,
-                 covariance, xs_plus, xs_minus, Ps, xs_hr, n):
+def mbf_backward(
+    Pf,
+    Phi,
+    fb,
+    r0,
+    r1,
+    H_ptr,
+    H_col,
+    H_val,
+    K,
+    G,
+    s,
+    n_nodes,
+    seg0,
+    seg1,
+    n_hr,
+    hr_F,
+    hr_Q,
+    hr_fb,
+    hr_r0,
+    hr_r1,
+    hr_ppi,
+    hr_Pp,
+    f_ptr,
+    f_col,
+    f_act,
+    q_row,
+    q_col,
+    covariance,
+    xs_plus,
+    xs_minus,
+    Ps,
+    xs_hr,
+    n,
+):
     """Modified Bryson-Frazier backward pass (module docstring) over the nodes
     ``0 .. n_nodes-1`` and the high-rate samples ``0 .. n_hr-1`` of a
     :class:`~insgnss.filter.store.NodeStore`.
@@ -280,8 +400,33 @@ def mbf_backward(Pf, Phi, fb, r0, r1, H_ptr, H_col, H_val, K, G, s, n_nodes, seg
 
     # trailing high-rate samples after the last node (a stopped run): lambda^ = 0 at the end
     if n_hr > tail0:
-        _hr_backward(tail0, n_hr, lam, lt, Lam, Lt, H_ptr, H_col, H_val, K, G, s, hr_r0,
-                     hr_r1, hr_F, f_ptr, f_col, f_act, covariance, KL, W, Hd, T1, LT, n)
+        _hr_backward(
+            tail0,
+            n_hr,
+            lam,
+            lt,
+            Lam,
+            Lt,
+            H_ptr,
+            H_col,
+            H_val,
+            K,
+            G,
+            s,
+            hr_r0,
+            hr_r1,
+            hr_F,
+            f_ptr,
+            f_col,
+            f_act,
+            covariance,
+            KL,
+            W,
+            Hd,
+            T1,
+            LT,
+            n,
+        )
         pend0, pend1 = tail0, n_hr
     for k in range(n_nodes - 1, -1, -1):
         P = Pf[k]
@@ -299,17 +444,59 @@ def mbf_backward(Pf, Phi, fb, r0, r1, H_ptr, H_col, H_val, K, G, s, n_nodes, seg
         if pend1 > pend0:  # rebuild the smoothed errors of the segment after node k
             for i in range(n):
                 x[i] = xs_plus[k, i]
-            _hr_forward(x, pend0, pend1, hr_F, hr_Q, hr_fb, hr_ppi, hr_Pp, LT, f_ptr,
-                        f_col, f_act, q_row, q_col, xs_hr, xm, n)
+            _hr_forward(
+                x,
+                pend0,
+                pend1,
+                hr_F,
+                hr_Q,
+                hr_fb,
+                hr_ppi,
+                hr_Pp,
+                LT,
+                f_ptr,
+                f_col,
+                f_act,
+                q_row,
+                q_col,
+                xs_hr,
+                xm,
+                n,
+            )
             pend0, pend1 = 0, 0
-        _through_update(lam, lt, Lam, Lt, H_ptr, H_col, H_val, K, G, s, r0[k], r1[k],
-                        covariance, KL, W, Hd, n)
+        _through_update(
+            lam, lt, Lam, Lt, H_ptr, H_col, H_val, K, G, s, r0[k], r1[k], covariance, KL, W, Hd, n
+        )
         if k > 0:
             _back_through_dense(lam, lt, Lam, Lt, Phi[k], covariance, T1)
             if seg1[k] > seg0[k]:  # the high-rate samples between node k-1 and k
-                _hr_backward(seg0[k], seg1[k], lam, lt, Lam, Lt, H_ptr, H_col, H_val, K, G, s,
-                             hr_r0, hr_r1, hr_F, f_ptr, f_col, f_act, covariance, KL, W, Hd,
-                             T1, LT, n)
+                _hr_backward(
+                    seg0[k],
+                    seg1[k],
+                    lam,
+                    lt,
+                    Lam,
+                    Lt,
+                    H_ptr,
+                    H_col,
+                    H_val,
+                    K,
+                    G,
+                    s,
+                    hr_r0,
+                    hr_r1,
+                    hr_F,
+                    f_ptr,
+                    f_col,
+                    f_act,
+                    covariance,
+                    KL,
+                    W,
+                    Hd,
+                    T1,
+                    LT,
+                    n,
+                )
                 pend0, pend1 = seg0[k], seg1[k]
 
 
@@ -327,10 +514,36 @@ def smooth(store, n_nodes: int, covariance: bool = True, pattern=None):
     if pattern is None:
         e = np.zeros(0, np.int64)
         pattern = (np.zeros(1, np.int64), e, e, e, e)
-    args = (store.Pf, store.Phi, store.fb, store.r0, store.r1, store.H_ptr, store.H_col,
-            store.H_val, store.K, store.G, store.s, n_nodes, store.seg0, store.seg1, n_hr,
-            store.hr_F, store.hr_Q, store.hr_fb, store.hr_r0, store.hr_r1, store.hr_ppi,
-            store.hr_Pp, *pattern, bool(covariance), xs_plus, xs_minus, Ps, xs_hr)
+    args = (
+        store.Pf,
+        store.Phi,
+        store.fb,
+        store.r0,
+        store.r1,
+        store.H_ptr,
+        store.H_col,
+        store.H_val,
+        store.K,
+        store.G,
+        store.s,
+        n_nodes,
+        store.seg0,
+        store.seg1,
+        n_hr,
+        store.hr_F,
+        store.hr_Q,
+        store.hr_fb,
+        store.hr_r0,
+        store.hr_r1,
+        store.hr_ppi,
+        store.hr_Pp,
+        *pattern,
+        bool(covariance),
+        xs_plus,
+        xs_minus,
+        Ps,
+        xs_hr,
+    )
     if n == 15:
         _mbf_backward15(*args)
     else:
@@ -427,7 +640,14 @@ def rts_error_state(P_filtered, P_predicted, Phi, feedback):
     xs_plus = np.zeros((E, n))
     xs_minus = np.zeros((E, n))
     Ps = np.empty_like(Pf)
-    rts_backward(Pf, np.ascontiguousarray(P_predicted, dtype=float),
-                 np.ascontiguousarray(Phi, dtype=float),
-                 np.ascontiguousarray(feedback, dtype=float), E, xs_plus, xs_minus, Ps)
+    rts_backward(
+        Pf,
+        np.ascontiguousarray(P_predicted, dtype=float),
+        np.ascontiguousarray(Phi, dtype=float),
+        np.ascontiguousarray(feedback, dtype=float),
+        E,
+        xs_plus,
+        xs_minus,
+        Ps,
+    )
     return xs_plus, xs_minus, Ps

@@ -96,8 +96,7 @@ def wander_feedback(Cne, hv, vel, C, pnom, x):
     phi = np.array([-x[6], -x[7], -x[8]])
     rotvec_to_dcm_nb(phi, R)
     Cbe = R @ (Cne @ C)
-    k = np.array([u[1] * un[2] - u[2] * un[1], u[2] * un[0] - u[0] * un[2],
-                  u[0] * un[1] - u[1] * un[0]])
+    k = np.array([u[1] * un[2] - u[2] * un[1], u[2] * un[0] - u[0] * un[2], u[0] * un[1] - u[1] * un[0]])
     s = np.sqrt(k[0] ** 2 + k[1] ** 2 + k[2] ** 2)
     if s > 0.0:
         k *= np.arctan2(s, u[0] * un[0] + u[1] * un[1] + u[2] * un[2]) / s
@@ -122,9 +121,12 @@ class WanderModel(StrapdownModel):
 
     def _setup(self, t, dth, dv, initial, extras, config):
         if config.error_dynamics != "full":
-            raise ConfigError("the wander-azimuth process model has the full error dynamics "
-                              "only", column="error_dynamics", expected=["full"],
-                              found=config.error_dynamics)
+            raise ConfigError(
+                "the wander-azimuth process model has the full error dynamics only",
+                column="error_dynamics",
+                expected=["full"],
+                found=config.error_dynamics,
+            )
         super()._setup(t, dth, dv, initial, extras, config)
         Cne, h, vel, C = wander_state(initial)
         self.Cne = np.ascontiguousarray(Cne)
@@ -177,16 +179,41 @@ class WanderModel(StrapdownModel):
         T = np.eye(n)
         Cel = self._enu_transform(self.pos[0], self.pos[1])
         for k in range(3):
-            T[3 * k:3 * k + 3, 3 * k:3 * k + 3] = Cel
+            T[3 * k : 3 * k + 3, 3 * k : 3 * k + 3] = Cel
         return T
 
     def _propagate_nominal(self, t_end: float, node: int):
         pm = self.noise
         out = kernels.propagate_nominal(
-            self.t, self.dth, self.dv, self.j, self.frac, t_end, self.pos, self.vel, self.C,
-            self.pnom, self.i_sg, self.i_sa, self.gmodel, self.aupd, self.sub_T, self.Fint,
-            self.Qint, self.sub_dt, pm.gyro_psd, pm.accel_psd, self.table, self.seg, node,
-            self.rates, pm.dyn_noise, 0, self.Cne, self.hv)
+            self.t,
+            self.dth,
+            self.dv,
+            self.j,
+            self.frac,
+            t_end,
+            self.pos,
+            self.vel,
+            self.C,
+            self.pnom,
+            self.i_sg,
+            self.i_sa,
+            self.gmodel,
+            self.aupd,
+            self.sub_T,
+            self.Fint,
+            self.Qint,
+            self.sub_dt,
+            pm.gyro_psd,
+            pm.accel_psd,
+            self.table,
+            self.seg,
+            node,
+            self.rates,
+            pm.dyn_noise,
+            0,
+            self.Cne,
+            self.hv,
+        )
         self._update_pos()
         return out
 
@@ -237,13 +264,23 @@ class WanderModel(StrapdownModel):
             else:
                 X0, X1, Ps, _ = smoothed
                 P0 = P1 = store.Pf[:n_nodes] if Ps is None else Ps
-            _wander_output(t, self.table, self.seg, self.post, store.t[:n_nodes],
-                           np.ascontiguousarray(P0), np.ascontiguousarray(P1),
-                           np.ascontiguousarray(X0), np.ascontiguousarray(X1),
-                           store.par[:n_nodes], smoothed is not None, out)
+            _wander_output(
+                t,
+                self.table,
+                self.seg,
+                self.post,
+                store.t[:n_nodes],
+                np.ascontiguousarray(P0),
+                np.ascontiguousarray(P1),
+                np.ascontiguousarray(X0),
+                np.ascontiguousarray(X1),
+                store.par[:n_nodes],
+                smoothed is not None,
+                out,
+            )
             if smoothed is not None and smoothed[2] is None:
                 out[:, 9:18] = np.nan
-                out[:, 18 + self.n_par:] = np.nan
+                out[:, 18 + self.n_par :] = np.nan
         return pd.DataFrame(out, index=pd.Index(t, name="time"), columns=cols, copy=False)
 
     def final_state(self, time: float):
@@ -300,8 +337,7 @@ def _wander_output(t, nav, seg, post, ep_t, P0, P1, X0, X1, par, correct, out):
         if correct:
             r0, r1, r2 = geodetic_to_ecef_nb(lat, lon, h)
             for i in range(3):  # v^e = C_l^e v^l - dv
-                ve[i] = (Cel[0, i] * nav[j, 3] + Cel[1, i] * nav[j, 4] + Cel[2, i] * nav[j, 5]
-                         - x[3 + i])
+                ve[i] = Cel[0, i] * nav[j, 3] + Cel[1, i] * nav[j, 4] + Cel[2, i] * nav[j, 5] - x[3 + i]
             for r in range(3):  # C_b^e = C_l^e C_b^l
                 for c in range(3):
                     Cbe[r, c] = Cel[0, r] * Cbl[0, c] + Cel[1, r] * Cbl[1, c] + Cel[2, r] * Cbl[2, c]
@@ -360,13 +396,14 @@ def run_wander_filter(imu: pd.DataFrame, initial, measurements, config=None):
     xn = config.extra_noise
     if xn is not None and "up_std" in xn and np.any(np.asarray(xn["up_std"], float) != 0.0):
         # the engine adds it to the third position state: "up" in ENU, the polar axis here
-        raise ConfigError("extra_noise up_std (vertical-only position noise) is not supported "
-                          "by the wander-azimuth model (ECEF errors); use pos_std",
-                          column="extra_noise.up_std")
+        raise ConfigError(
+            "extra_noise up_std (vertical-only position noise) is not supported "
+            "by the wander-azimuth model (ECEF errors); use pos_std",
+            column="extra_noise.up_std",
+        )
     measurements = list(measurements)
     extras = []
     for m in measurements:
         extras.extend(m.extra_states())
     model = WanderModel(imu, initial, extras, config)
     return run_engine(model, measurements, config)
-
