@@ -734,8 +734,9 @@ def imu_rates(imu: pd.DataFrame) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         dt = np.diff(t)
         w = np.empty((t.size, 3))
         a = np.empty((t.size, 3))
-        w[1:] = imu[DTHETA_COLS].to_numpy(float)[1:] / dt[:, None]
-        a[1:] = imu[DV_COLS].to_numpy(float)[1:] / dt[:, None]
+        # into the results: no (N, 3) temporary per triad
+        np.divide(imu[DTHETA_COLS].to_numpy(float)[1:], dt[:, None], out=w[1:])
+        np.divide(imu[DV_COLS].to_numpy(float)[1:], dt[:, None], out=a[1:])
         w[0], a[0] = w[min(1, t.size - 1)], a[min(1, t.size - 1)]
         return t, w, a
     return t, imu[GYRO_COLS].to_numpy(float), imu[ACCEL_COLS].to_numpy(float)

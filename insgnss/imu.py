@@ -84,6 +84,36 @@ def increments(imu: pd.DataFrame) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     return t, trapezoid_increments(t, w), trapezoid_increments(t, f)
 
 
+def triad_blocks(imu: pd.DataFrame, allocate=None) -> pd.DataFrame:
+    """The IMU table ``imu`` with each sensor triad (``dtheta_*`` / ``dv_*``, or ``gyro_*`` /
+    ``accel_*``) held as one C-contiguous (N, 3) array, the index and any other column as
+    their own arrays (same values, names, order and ``attrs``).
+
+    A reader's table is one column-major block of all its fields: the (N, 3) triads that
+    :func:`increments` hands to the filter are then strided and its process model copies them
+    (two tables of the increments, 48 bytes per sample more: 0.35 GB for 10 h at 200 Hz).
+    On this layout :func:`increments` returns views of the triads, used without a copy. The
+    table's old arrays are released when the caller drops it. ``allocate(shape)`` makes the
+    triad arrays (default ``numpy.empty``; an :class:`insgnss.io.spill.SpillAllocator` puts a
+    long log's on a memory-mapped file, whose pages :func:`insgnss.io.spill.release_frame`
+    gives back when the data are not in use).
+    """
+    first, second = (DTHETA_COLS, DV_COLS) if is_increment_table(imu) else \
+        (GYRO_COLS, ACCEL_COLS)
+    index = pd.Index(np.array(imu.index, dtype=float), name=imu.index.name)
+    parts = []
+    for cols in (first, second):
+        a = (np.empty if allocate is None else allocate)((len(imu), 3))
+        a[:] = imu[cols].to_numpy(float)
+        parts.append(pd.DataFrame(a, index=index, columns=cols, copy=False))
+    for c in imu.columns:
+        if c not in first and c not in second:
+            parts.append(pd.DataFrame({c: np.array(imu[c].to_numpy())}, index=index))
+    out = pd.concat(parts, axis=1)[list(imu.columns)]
+    out.attrs = dict(imu.attrs)
+    return out
+
+
 def trapezoid_increments(t: np.ndarray, x: np.ndarray) -> np.ndarray:
     """Trapezoidal integral of samples ``x`` over each interval; row 0 is zero."""
     out = np.zeros_like(x, dtype=float)

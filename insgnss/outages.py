@@ -61,19 +61,28 @@ def _disjoint(windows) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
     return a, b, order
 
 
+#: times per block of :func:`window_index` (its temporaries stay small on a long log)
+_BLOCK = 1 << 20
+
+
 def window_index(t, windows) -> np.ndarray:
     """Index of the window containing each time, -1 outside all windows (overlapping windows:
     the last one listed wins)."""
+    t = np.asarray(t, dtype=float)
+    d = _disjoint(windows) if len(windows) else None
+    if d is not None:  # O((N + W) log W) for any number of windows, block by block
+        a, b, order = d
+        idx = np.full(t.shape, -1, dtype=int)
+        flat, out = t.reshape(-1), idx.reshape(-1)
+        for i in range(0, flat.size, _BLOCK):
+            t_us = _us(flat[i:i + _BLOCK])
+            k = np.searchsorted(a, t_us, side="right") - 1
+            inside = (k >= 0) & (t_us < b[np.maximum(k, 0)])
+            out[i:i + _BLOCK][inside] = order[k[inside]]
+        return idx
     t_us = _us(t)
     idx = np.full(t_us.shape, -1, dtype=int)
     if not len(windows):
-        return idx
-    d = _disjoint(windows)
-    if d is not None:  # O((N + W) log W) for any number of windows
-        a, b, order = d
-        k = np.searchsorted(a, t_us, side="right") - 1
-        inside = (k >= 0) & (t_us < b[np.maximum(k, 0)])
-        idx[inside] = order[k[inside]]
         return idx
     for k, (a, b) in enumerate(windows):
         idx[(t_us >= int(_us(a))) & (t_us < int(_us(b)))] = k

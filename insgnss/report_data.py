@@ -390,6 +390,13 @@ def output_table(result, df) -> pd.DataFrame:
                                                      job["process"]["preset"]))
 
 
+#: solution columns the state errors and the NEES read (:func:`_state_errors`, :func:`_nees`):
+#: the rows around the reference epochs are taken with these only, not every output column
+STATE_COLUMNS = ("lat", "lon", "height", "vel_e", "vel_n", "vel_u", "roll", "pitch", "heading",
+                 "east_std", "north_std", "up_std", "vel_e_std", "vel_n_std", "vel_u_std",
+                 "roll_std", "pitch_std", "heading_std")
+
+
 def _bracketing_rows(ts: np.ndarray, times: np.ndarray) -> np.ndarray:
     """Sorted rows of the samples ``ts`` on either side of each of ``times`` (all a linear
     interpolation at ``times`` or a match within 1 us needs: :func:`sample_at`)."""
@@ -415,7 +422,10 @@ def build_report_data(result) -> ReportData:
         notes.append("The reference measures the antenna and the lever arm is not zero: "
                      "velocity errors are not formed (the antenna velocity needs the body rate).")
     if ref is not None and len(ref):  # the reference epochs the report evaluates (see Rate)
-        ref = output_table(result, ref)
+        from .io.spill import release_frame
+
+        full_ref, ref = ref, output_table(result, ref)
+        release_frame(full_ref)  # a mapped reference (job/inputs.py): its pages go back
     if ref is not None and kinds:
         missing = [q for q in ("velocity", "attitude") if q not in _reference_kinds(ref)]
         if missing:
@@ -440,7 +450,8 @@ def build_report_data(result) -> ReportData:
             # the solution rows around the evaluated epochs (not the whole log)
             at = err.index.to_numpy(float) if ref is None else \
                 np.union1d(err.index.to_numpy(float), ref.index.to_numpy(float))
-            tab = select_rows(full, lambda t, at=at: _bracketing_rows(t, at))
+            tab = select_rows(full, lambda t, at=at: _bracketing_rows(t, at),
+                              STATE_COLUMNS)
             err = err[["east", "north", "up", "horizontal"]
                       + [c for c in ("east_std", "north_std", "up_std")
                          if c in err.columns]].copy()

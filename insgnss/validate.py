@@ -237,7 +237,8 @@ def _split_rows(path, comment, header, trim) -> TextRows:
 
 
 def read_rows(path: str | os.PathLike, *, comment: tuple[str, ...] = ("#",),
-              header: bool = False, delimiter: str | None = ",", trim: bool = False) -> TextRows:
+              header: bool = False, delimiter: str | None = ",", trim: bool = False,
+              allocate=None) -> TextRows:
     """The data lines of a text file (:func:`read_text` + :func:`split_lines`), with every field
     already parsed as float (``TextRows.table``) when the file is a clean numeric table.
 
@@ -245,9 +246,12 @@ def read_rows(path: str | os.PathLike, *, comment: tuple[str, ...] = ("#",),
     started and stopped while writing; at least 3 lines are required). :func:`parse_numeric`
     takes its values from ``table`` when it can and otherwise parses ``lines``, which are
     split on first use; the result, and every error message, is the same either way.
+    ``allocate(shape)``: where ``table`` is made (default ``numpy.empty``; an
+    :class:`insgnss.io.spill.SpillAllocator` puts a long table on a memory-mapped file, whose
+    pages are given back block by block as they are parsed).
     """
     comment = tuple(c for c in comment if c)
-    rows = _clean_rows(Path(path), comment, header, delimiter, trim)
+    rows = _clean_rows(Path(path), comment, header, delimiter, trim, allocate)
     return rows if rows is not None else _split_rows(path, comment, header, trim)
 
 
@@ -280,7 +284,8 @@ def _file_chunks(path: Path, start: int, stop: int, block: int):
             yield carry
 
 
-def _clean_rows(path: Path, comment, header, delimiter, trim) -> TextRows | None:
+def _clean_rows(path: Path, comment, header, delimiter, trim, allocate=None
+                ) -> TextRows | None:
     """:func:`read_rows` on pyarrow, or None when the file is not clean (see above).
 
     A file larger than :data:`READ_BLOCK` is read and parsed block by block (line-aligned),
@@ -374,7 +379,7 @@ def _clean_rows(path: Path, comment, header, delimiter, trim) -> TextRows | None
     import pyarrow as pa
     import pyarrow.csv as pacsv
 
-    from .io.spill import trim_heap
+    from .io.spill import release, trim_heap
 
     names = [f"f{i}" for i in range(n_fields)]
     opts = {"read_options": pacsv.ReadOptions(column_names=names),
@@ -389,7 +394,8 @@ def _clean_rows(path: Path, comment, header, delimiter, trim) -> TextRows | None
             "memory_pool": pa.system_memory_pool()}
     if n_lines == 0:
         return None
-    values = np.empty((n_fields, n_lines)).T  # column-major: each column one contiguous copy
+    # column-major: each column one contiguous copy
+    values = (np.empty if allocate is None else allocate)((n_fields, n_lines)).T
     r0, any_null = 0, False
     for c in chunks():  # pass 2: parse block by block into the values
         try:
@@ -408,6 +414,7 @@ def _clean_rows(path: Path, comment, header, delimiter, trim) -> TextRows | None
         any_null = any_null or any(nulls)
         for j, col in enumerate(tab.columns):
             values[r0:r0 + m, j] = (col.fill_null(np.nan) if nulls[j] else col).to_numpy()
+            release(values[:, j], r0, r0 + m)  # a mapped table: the block's pages go back
         r0 += m
         del tab
     trim_heap()
@@ -512,17 +519,24 @@ def _diagnose_numeric(rows: TextRows, names, cols, delimiter, exact) -> np.ndarr
 # --------------------------------------------------------------------------------------------
 
 
-def check_finite(values: np.ndarray, names: Sequence[str], line_no: np.ndarray, file) -> None:
-    """Raise InvalidValueError at the first NaN or inf (row-major order)."""
+def check_finite(values: np.ndarray, names: Sequence[str], line_no: np.ndarray, file, *,
+                 columns: Sequence[int] | None = None) -> None:
+    """Raise InvalidValueError at the first NaN or inf (row-major order) of ``values``, or of
+    its ``columns`` (named ``names``), checked one column at a time: no copy of the columns."""
     values = np.asarray(values, float)
     if values.ndim == 1:
         values = values[:, None]
-    ok = np.isfinite(values)
-    if ok.all():
+    cols = range(values.shape[1]) if columns is None else list(columns)
+    first = None  # (row, position in cols) of the first non-finite value
+    for j, c in enumerate(cols):
+        bad = np.flatnonzero(~np.isfinite(values[:, c]))
+        if bad.size and (first is None or bad[0] < first[0]):
+            first = (int(bad[0]), j)
+    if first is None:
         return
-    i, j = np.argwhere(~ok)[0]
+    i, j = first
     raise InvalidValueError("non-finite value", file=file, row=int(line_no[i]), column=names[j],
-                            expected="a finite number", found=str(values[i, j]))
+                            expected="a finite number", found=str(values[i, cols[j]]))
 
 
 def check_range(values: np.ndarray, lo: float, hi: float, column: str, line_no: np.ndarray, file,

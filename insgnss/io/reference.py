@@ -38,7 +38,8 @@ def reference_format(path: str | os.PathLike, format: str | None = None) -> str:
 
 
 def read_reference(path: str | os.PathLike, format: str | None = None, *, fix_only: bool = False,
-                   week: int | None = None, time_base: str = "gps") -> pd.DataFrame:
+                   week: int | None = None, time_base: str = "gps", allocate=None
+                   ) -> pd.DataFrame:
     """Read a reference trajectory.
 
     Parameters
@@ -52,10 +53,14 @@ def read_reference(path: str | os.PathLike, format: str | None = None, *, fix_on
         KF-GINS only: GPS week for seconds-of-week files.
     time_base : {"gps", "sow", "unix_gpst"}
         RTKLIB only: time base of the index.
+    allocate : callable, optional
+        Native only: where the values are made (:func:`.tracks.read_trajectory_csv`; a
+        :class:`insgnss.io.spill.SpillAllocator` holds a long reference on a memory-mapped
+        file).
     """
     fmt = reference_format(path, format)
     if fmt == "native":
-        return read_trajectory_csv(path)
+        return read_trajectory_csv(path, allocate=allocate)
     if fmt == "kfgins-nav":
         return read_kfgins_nav(path, week=week)
     df = read_rtklib_pos(path, time_base=time_base)

@@ -34,7 +34,7 @@ from pathlib import Path
 import numpy as np
 
 __all__ = ["BLOCK_BYTES", "SPILL_PREFIX", "SpillAllocator", "blocks", "is_mapped", "release",
-           "trim_heap"]
+           "release_frame", "trim_heap"]
 
 #: prefix of the mapped files (hidden; removed at once on POSIX)
 SPILL_PREFIX = ".insgnss-store-"
@@ -131,6 +131,14 @@ def release(a: np.ndarray, start: int = 0, stop: int | None = None) -> None:
             mm.madvise(advice, lo, hi - lo)
         except (OSError, ValueError):
             pass
+
+
+def release_frame(df, start: int = 0, stop: int | None = None) -> None:
+    """:func:`release` rows ``start .. stop-1`` of every column of a DataFrame whose columns
+    lie on a mapped file (a reader's table made by a :class:`SpillAllocator`); nothing for
+    the columns in memory."""
+    for c in range(df.shape[1] if len(df) else 0):
+        release(df.iloc[:, c].to_numpy(), start, stop)
 
 
 def blocks(n: int, row_bytes: int, block_bytes: int | None = None):

@@ -92,13 +92,18 @@ def write_trajectory_csv(df: pd.DataFrame, path: str | os.PathLike, *,
 
 
 def read_trajectory_csv(path: str | os.PathLike, *, required: Sequence[str] = ("lat", "lon", "height"),
-                        duplicates: str = "error") -> pd.DataFrame:
+                        duplicates: str = "error", allocate=None) -> pd.DataFrame:
     """Read a native insgnss CSV with full validation (radians inside).
 
     Empty cells and ``nan`` are NaN; NaN/inf are errors in ``time`` and the ``required``
-    columns only. Time must increase strictly.
+    columns only. Time must increase strictly. ``allocate``: where the values are made
+    (:func:`insgnss.validate.read_rows`; a :class:`insgnss.io.spill.SpillAllocator` holds a
+    long table on a memory-mapped file, its pages given back after reading: read them in
+    blocks and give them back with :func:`insgnss.io.spill.release_frame`).
     """
-    rows = read_rows(path, comment=("#",), header=True, delimiter=",")
+    from .spill import release_frame
+
+    rows = read_rows(path, comment=("#",), header=True, delimiter=",", allocate=allocate)
     head = [h.strip() for h in rows.header.split(",")]
     if not head or head[0] != "time":
         raise InputFormatError("first column must be 'time'", file=path, row=rows.header_line,
@@ -116,7 +121,7 @@ def read_trajectory_csv(path: str | os.PathLike, *, required: Sequence[str] = ("
                                    found=", ".join(head))
     v = parse_numeric(rows, head, delimiter=",", empty_nan=True)
     idx = [0] + [head.index(c) for c in file_names]
-    check_finite(v[:, idx], [head[i] for i in idx], rows.line_no, path)
+    check_finite(v, [head[i] for i in idx], rows.line_no, path, columns=idx)
     for c, lim in (("lat_deg", 90.0), ("lon_deg", 360.0)):
         if c in head:
             check_range(v[:, head.index(c)], -lim, lim, c, rows.line_no, path, unit="deg")
@@ -131,6 +136,7 @@ def read_trajectory_csv(path: str | os.PathLike, *, required: Sequence[str] = ("
             v[:, i] = np.radians(v[:, i])
     df = pd.DataFrame(v[:, 1:], index=pd.Index(v[:, 0], name="time"), columns=names[1:],
                       copy=False)
+    release_frame(df)  # the checks read every row
     return finish_attrs(df, file=path, fmt="native", time_base="unspecified",
                         line_no=rows.line_no[keep], dropped_duplicates=dropped)
 

@@ -64,8 +64,11 @@ def reference_errors(sol, inputs: Inputs, block: int = REFERENCE_BLOCK) -> pd.Da
     ``sol`` is a DataFrame or a :class:`insgnss.filter.store.Table`; for each block of
     ``block`` reference epochs only the solution rows bracketing them are read (the rows the
     interpolation uses, so the numbers are those of the whole table): no whole-log copy of
-    the solution columns is made."""
+    the solution columns is made. The pages of each block of a memory-mapped reference
+    (:func:`insgnss.job.inputs.read_reference`) are given back after it, and the table is
+    built on one array (no copy per column)."""
     from ..filter.store import Table, select_rows
+    from ..io.spill import release_frame
 
     ref = inputs.reference
     tr = ref.index.to_numpy(float)
@@ -73,8 +76,9 @@ def reference_errors(sol, inputs: Inputs, block: int = REFERENCE_BLOCK) -> pd.Da
     cols = EVAL_COLUMNS + (ATTITUDE_COLUMNS if inputs.reference_point == "antenna" else ())
     has = list(sol.columns) if hasattr(sol, "columns") else None
     stds = [c for c in ("east_std", "north_std", "up_std") if has is None or c in has]
-    enu = np.empty((tr.size, 3))
-    sd = np.empty((tr.size, len(stds)))
+    # column-major: east north up horizontal, then the stds (unused columns are never touched)
+    values = np.empty((4 + len(stds), tr.size)).T
+    enu, sd = values[:, :3], values[:, 4:]
     for a in range(0, tr.size, block):
         b = min(a + block, tr.size)
         lo = max(int(np.searchsorted(ts, tr[a], side="right")) - 1, 0)
@@ -87,15 +91,14 @@ def reference_errors(sol, inputs: Inputs, block: int = REFERENCE_BLOCK) -> pd.Da
             else part
         e = position_errors(pt, ref.iloc[a:b])
         enu[a:b] = e[["east", "north", "up"]].to_numpy(float)
+        values[a:b, 3] = e["horizontal"].to_numpy(float)
         tp = part.index.to_numpy(float)
         for k, c in enumerate(stds):
             sd[a:b, k] = np.interp(tr[a:b], tp, part[c].to_numpy(float))
+        release_frame(ref, a, b)
         del part, pt, e
-    err = pd.DataFrame(enu, index=ref.index, columns=["east", "north", "up"], copy=False)
-    err["horizontal"] = np.hypot(err["east"], err["north"])
-    for k, c in enumerate(stds):
-        err[c] = sd[:, k]
-    return err
+    return pd.DataFrame(values[:, :4 + len(stds)], index=ref.index,
+                        columns=["east", "north", "up", "horizontal", *stds], copy=False)
 
 
 def stored_errors(err: pd.DataFrame, inputs: Inputs, job: Job) -> pd.DataFrame:
@@ -126,11 +129,15 @@ def position_nees(err: pd.DataFrame, windows) -> dict:
     cols = ["east", "north", "up"]
     if not len(err) or not all(f"{c}_std" in err.columns for c in cols):
         return {}
-    e = err[cols].to_numpy(float)
-    sd = err[[f"{c}_std" for c in cols]].to_numpy(float)
+    # one column at a time: no (N, 3) temporaries (the same sum, in the same order)
+    nees = np.zeros(len(err))
+    ok = np.ones(len(err), bool)
     with np.errstate(divide="ignore", invalid="ignore"):
-        nees = np.sum((e / sd) ** 2, axis=1)
-    ok = np.isfinite(nees) & np.all(sd > 0, axis=1)
+        for c in cols:
+            e, sd = err[c].to_numpy(float), err[f"{c}_std"].to_numpy(float)
+            nees += (e / sd) ** 2
+            ok &= sd > 0
+    ok &= np.isfinite(nees)
     inside = in_windows(err.index.to_numpy(float), windows)
     out = {}
     for tag, m in (("nees_pos", ok), ("nees_pos_outage", ok & inside)):

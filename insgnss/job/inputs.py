@@ -15,7 +15,8 @@ import pandas as pd
 from ..checks import check_latitude_radians
 from ..config import Job
 from ..errors import ConfigError
-from ..imu import ImuErrorModel, grade
+from ..imu import ImuErrorModel, grade, triad_blocks
+from ..io.spill import SpillAllocator, release_frame, trim_heap
 from ..policies import gap_policy
 from ..validate import check_time_bases
 
@@ -69,8 +70,29 @@ def imu_model(job: Job, default: ImuErrorModel | None) -> ImuErrorModel:
     return base.scaled(**changes, name=f"{base.name}+overrides")
 
 
-def read_imu(job: Job) -> pd.DataFrame:
-    """The IMU table of ``[inputs.imu]`` (body frame, SI, time in the job's time base)."""
+def input_allocator(job: Job, spill_dir=None) -> SpillAllocator:
+    """Where the long input arrays (the IMU triads, a native reference) are made: in memory
+    up to ``filter.store_memory_mb`` (the budget of the engine's store, counted separately),
+    memory-mapped in ``spill_dir`` beyond it (default: the system's temporary folder;
+    :mod:`insgnss.io.spill`). The pages of a mapped table are given back after each stage
+    that reads it (:func:`insgnss.io.spill.release_frame`), so the inputs of a long log are
+    not resident between the stages that use them."""
+    return SpillAllocator(job["filter"]["store_memory_mb"] * 2.0**20, spill_dir)
+
+
+def read_imu(job: Job, allocate=None) -> pd.DataFrame:
+    """The IMU table of ``[inputs.imu]`` (body frame, SI, time in the job's time base), each
+    sensor triad held as one (N, 3) array made by ``allocate`` (:func:`insgnss.imu.
+    triad_blocks`: the filter uses the increments without a copy)."""
+    table = _read_imu_table(job)
+    out = triad_blocks(table, allocate)
+    del table  # the reader's block of all fields goes before the next input is read
+    trim_heap()
+    release_frame(out)
+    return out
+
+
+def _read_imu_table(job: Job) -> pd.DataFrame:
     spec = job["inputs"]["imu"]
     path = job.resolve(spec["path"])
     if path is None:
@@ -169,8 +191,11 @@ def read_gnss_raw(job: Job):
     return raw, sol
 
 
-def read_reference(job: Job) -> pd.DataFrame | None:
-    """The reference trajectory of ``[inputs.reference]`` (None without a file)."""
+def read_reference(job: Job, allocate=None) -> pd.DataFrame | None:
+    """The reference trajectory of ``[inputs.reference]`` (None without a file). A native
+    table is made by ``allocate`` (:func:`input_allocator`: a long one on a memory-mapped
+    file): the evaluation reads it in blocks and gives each block's pages back, so the
+    reference of a long log (0.6 GB for 10 h at 200 Hz) is not resident at once."""
     spec = job["inputs"]["reference"]
     path = job.resolve(spec["path"])
     if path is None:
@@ -184,12 +209,14 @@ def read_reference(job: Job) -> pd.DataFrame | None:
     else:
         from ..io.reference import read_reference as read
 
-        ref = read(path, "kfgins-nav" if spec["format"] == "kfgins_nav" else "native")
+        ref = read(path, "kfgins-nav" if spec["format"] == "kfgins_nav" else "native",
+                   allocate=allocate)
     return ref
 
 
-def load_inputs(job: Job, seed: int | None = None) -> Inputs:
-    """Read (or simulate, for a job that carries a scenario) all inputs of a job."""
+def load_inputs(job: Job, seed: int | None = None, spill_dir=None) -> Inputs:
+    """Read (or simulate, for a job that carries a scenario) all inputs of a job;
+    ``spill_dir``: where long input arrays are memory-mapped (:func:`input_allocator`)."""
     la = np.asarray(job["inputs"]["gnss"]["lever_arm"], float)  # 3 finite numbers (config)
     if job.simulation and job["inputs"]["imu"]["path"] is None:
         from ..simulate.scenario import simulate_scenario
@@ -204,7 +231,8 @@ def load_inputs(job: Job, seed: int | None = None) -> Inputs:
                       lever_arm=sim_la, truth=truth, sensor_truth=sim.sensor_errors(),
                       source="simulation", seed=sim.seed,
                       imu_model=imu_model(job, grade(sim_grade) if sim_grade else None))
-    imu = read_imu(job)
+    allocate = input_allocator(job, spill_dir)
+    imu = read_imu(job, allocate)
     gnss = read_gnss(job)
     raw, sol = read_gnss_raw(job)
     if gnss is None:
@@ -224,15 +252,17 @@ def load_inputs(job: Job, seed: int | None = None) -> Inputs:
 
         cp = read_table(job.resolve(job["inputs"]["control_points"]["path"]),
                         required=["lat", "lon", "height"])
-    ref = read_reference(job)
+    ref = read_reference(job, allocate)
     check_time_bases({"IMU": imu, "GNSS": gnss, "odometer": odo, "reference": ref,
                       "control points": cp}, job["job"]["time_base"], file=job.path)
     for table, what in ((gnss, "GNSS table"), (ref, "reference"), (cp, "control points")):
         check_latitude_radians(table, what=what)  # degrees in a radians column
+    if ref is not None:
+        release_frame(ref)  # a mapped reference: the pages the checks read go back
     return Inputs(imu=imu, gnss=gnss, gnss_raw=raw, spp=sol, odometer=odo, reference=ref,
                   reference_point=job["inputs"]["reference"]["point"], control_points=cp,
                   lever_arm=la, imu_model=imu_model(job, None))
 
 
-__all__ = ["Inputs", "gnss_model_config", "imu_model", "load_inputs", "read_gnss",
-           "read_gnss_raw", "read_imu", "read_reference"]
+__all__ = ["Inputs", "gnss_model_config", "imu_model", "input_allocator", "load_inputs",
+           "read_gnss", "read_gnss_raw", "read_imu", "read_reference"]

@@ -37,7 +37,7 @@ from ..filter.engine import FilterConfig, run_filter
 from ..filter.heading_reinit import HeadingReinit
 from ..filter.health import with_imu_note
 from ..imu import ImuErrorModel, coning_sculling, increments, increments_table
-from ..io.spill import SpillAllocator, trim_heap
+from ..io.spill import SpillAllocator, release_frame, trim_heap
 from ..policies import gap_noise, sample_rates
 from ..preprocess import vibration_noise, with_static_noise
 from ..validate import warn
@@ -208,6 +208,7 @@ def _strapdown_filter(ctx: RunContext, tuned: Tuned, smoother: bool = True,
         res = run_filter(imu, init.state, aiding.models, cfg, progress=ctx.progress and smoother)
     if smoother:
         trim_heap()  # the increments, the smoother's temporaries (a long log: 100s of MiB)
+        release_frame(inputs.imu)  # mapped IMU triads (job/inputs.py): their pages go back
     return res, init, aiding, imu
 
 

@@ -34,7 +34,7 @@ def prepare(job: Job, *, progress: bool | None = None, seed: int | None = None,
     node store is memory-mapped beyond ``filter.store_memory_mb`` (default: the system's
     temporary folder)."""
     t_start = time.perf_counter()
-    inputs = load_inputs(job, seed) if inputs is None else inputs
+    inputs = load_inputs(job, seed, spill_dir) if inputs is None else inputs
     t_read = time.perf_counter() - t_start
     all_gnss = inputs.gnss  # outage windows follow the whole recording (span.py)
     window = processing_window(job, inputs.imu)
