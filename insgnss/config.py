@@ -775,8 +775,10 @@ SCHEMA: dict[str, Any] = {
                                  check=_integer(1), when=_on("filter.smoother")),
         "store_memory_mb": _spec(_NUM, 64.0, "memory [MiB] for the engine's stored arrays (the "
                                  "smoother's per-epoch store, the IMU-rate forward and smoothed "
-                                 "tables); beyond it they are memory-mapped in the output folder "
-                                 "(or the temporary folder) and read in blocks, same numbers",
+                                 "tables) and, counted apart, for the long input arrays (IMU "
+                                 "triads, a native reference); beyond it they are memory-mapped "
+                                 "in the output folder (or the temporary folder) and read in "
+                                 "blocks, same numbers",
                                  check=_number(1.0, 1.0e7)),
         "coning": _spec(bool, False, "two-sample coning/sculling correction of the increments "
                         "(strapdown and foot; for integrated increments, not for the exact "

@@ -172,8 +172,12 @@ def _state_errors(sol: pd.DataFrame, ref: pd.DataFrame, kinds: tuple) -> tuple:
         if c not in r.columns:
             r[c] = np.nan
     times = r.index.to_numpy(float)
-    s = sample_at(sol, times)
-    err, sig, x = solution_errors(s, r, times)
+    # in blocks of epochs: the per-epoch temporaries (attitude matrices, the solution rows)
+    # stay small on a long log; every quantity is formed epoch by epoch (the same numbers)
+    parts = [solution_errors(sample_at(sol, times[a:a + STATE_BLOCK]),
+                             r.iloc[a:a + STATE_BLOCK], times[a:a + STATE_BLOCK])
+             for a in range(0, max(times.size, 1), STATE_BLOCK)]
+    err, sig, x = (np.concatenate([p[k] for p in parts]) for k in range(3))
     cols = {}
     for q, name in enumerate(ERROR_QUANTITIES):
         if name in QUANTITIES["velocity"][0] and "velocity" in kinds or \
@@ -397,6 +401,10 @@ STATE_COLUMNS = ("lat", "lon", "height", "vel_e", "vel_n", "vel_u", "roll", "pit
                  "roll_std", "pitch_std", "heading_std")
 
 
+#: reference epochs per block of :func:`_state_errors`
+STATE_BLOCK = 1 << 16
+
+
 def _bracketing_rows(ts: np.ndarray, times: np.ndarray) -> np.ndarray:
     """Sorted rows of the samples ``ts`` on either side of each of ``times`` (all a linear
     interpolation at ``times`` or a match within 1 us needs: :func:`sample_at`)."""
@@ -467,6 +475,7 @@ def build_report_data(result) -> ReportData:
             sd.errors = err
             ok = np.isfinite(x[:, :3]).all(axis=1)
             sd.nees, sd.nees_note = _nees(f, name, tab, x[ok], t_x[ok], kinds)
+            tab = x = xs = None  # before the next solution's rows are taken
         sols[name] = sd
     best = sols.get("smoothed") or sols["forward"]
     origin = tuple(float(best.table[c].iloc[0]) for c in ("lat", "lon", "height"))

@@ -129,3 +129,44 @@ def test_position_nees_by_columns_equals_the_row_sum():
     inside = ok & (t >= 50.0) & (t < 80.0)
     assert out["nees_pos_outage_n"] == int(inside.sum()) == 300
     assert out["nees_pos_outage_mean"] == float(np.mean(nees[inside]))
+
+
+def test_report_state_errors_in_blocks_equal_one_block(monkeypatch):
+    import insgnss.report_data as rd
+
+    n = 3000
+    t = np.arange(n) * 0.01
+    rng = np.random.default_rng(11)
+    base = {
+        "lat": 0.84 + 1e-8 * np.arange(n),
+        "lon": 0.2 + 1e-8 * np.arange(n),
+        "height": 300.0 + np.sin(t),
+        "vel_e": np.cos(t),
+        "vel_n": np.sin(t),
+        "vel_u": 0.1 * t,
+        "roll": 0.01 * np.sin(t),
+        "pitch": 0.02 * np.cos(t),
+        "heading": np.linspace(-3.0, 3.0, n),
+    }
+    ref = pd.DataFrame(base, index=pd.Index(t, name="time"))
+    sol = ref + rng.normal(scale=1e-6, size=ref.shape)
+    for c in (
+        "east_std",
+        "north_std",
+        "up_std",
+        "vel_e_std",
+        "vel_n_std",
+        "vel_u_std",
+        "roll_std",
+        "pitch_std",
+        "heading_std",
+    ):
+        sol[c] = rng.uniform(0.1, 1.0, n)
+    kinds = ("position", "velocity", "attitude")
+    one = rd._state_errors(sol, ref.iloc[::3], kinds)
+    monkeypatch.setattr(rd, "STATE_BLOCK", 97)
+    blocked = rd._state_errors(sol, ref.iloc[::3], kinds)
+    pd.testing.assert_frame_equal(blocked[0], one[0], check_exact=True)
+    np.testing.assert_array_equal(blocked[1], one[1])
+    np.testing.assert_array_equal(blocked[2], one[2])
+    assert one[1].shape == (1000, 9) and np.isfinite(one[1]).all()

@@ -37,7 +37,7 @@ from ..filter.engine import FilterConfig, run_filter
 from ..filter.heading_reinit import HeadingReinit
 from ..filter.health import with_imu_note
 from ..imu import ImuErrorModel, coning_sculling, increments, increments_table
-from ..io.spill import SpillAllocator, release_frame, trim_heap
+from ..io.spill import SpillAllocator, release, release_frame, trim_heap
 from ..policies import gap_noise, sample_rates
 from ..preprocess import vibration_noise, with_static_noise
 from ..validate import warn
@@ -209,6 +209,11 @@ def _strapdown_filter(ctx: RunContext, tuned: Tuned, smoother: bool = True,
     if smoother:
         trim_heap()  # the increments, the smoother's temporaries (a long log: 100s of MiB)
         release_frame(inputs.imu)  # mapped IMU triads (job/inputs.py): their pages go back
+        # and those of the node store's arrays the result keeps (the report reads a few rows)
+        for name in ("P_filtered", "P_predicted", "Phi", "feedback", "P_smoothed"):
+            a = getattr(res, name, None)
+            if isinstance(a, np.ndarray):
+                release(a)
     return res, init, aiding, imu
 
 
