@@ -1074,6 +1074,7 @@ def find_static_windows(imu: pd.DataFrame, *, max_accel_std: float, max_rate_std
     w = sample_count(window, dt)
     sa = amv_statistic(np.require(acc, float, ["C", "W"]), w)
     sw = amv_statistic(np.require(gyro, float, ["C", "W"]), w)
+    del gyro, acc  # the rate arrays (48 bytes per sample) before the statistics' temporaries
     fa, fw = float(np.quantile(sa, FLOOR_QUANTILE)), float(np.quantile(sw, FLOOR_QUANTILE))
     # a sample whose window reaches into an excluded interval
     ok = ~in_intervals(t, exclude, pad=0.5 * window)
