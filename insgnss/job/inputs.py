@@ -14,8 +14,8 @@ import pandas as pd
 
 from ..checks import check_latitude_radians
 from ..config import Job
-from ..errors import ConfigError
-from ..imu import ImuErrorModel, grade, triad_blocks
+from ..errors import ConfigError, InputFormatError
+from ..imu import ImuErrorModel, grade, is_increment_table, triad_blocks
 from ..io.spill import SpillAllocator, release_frame, trim_heap
 from ..policies import gap_policy
 from ..validate import check_time_bases
@@ -85,6 +85,11 @@ def read_imu(job: Job, allocate=None) -> pd.DataFrame:
     sensor triad held as one (N, 3) array made by ``allocate`` (:func:`insgnss.imu.
     triad_blocks`: the filter uses the increments without a copy)."""
     table = _read_imu_table(job)
+    try:
+        is_increment_table(table)  # the columns, checked before the triads are made
+    except ValueError as exc:
+        raise InputFormatError(str(exc), file=job.resolve(job["inputs"]["imu"]["path"]),
+                               row=1) from None
     out = triad_blocks(table, allocate)
     del table  # the reader's block of all fields goes before the next input is read
     trim_heap()
