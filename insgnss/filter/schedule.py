@@ -23,6 +23,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from numba import njit
 
 __all__ = ["Schedule", "build_schedule"]
 
@@ -124,33 +125,79 @@ def build_schedule(t: np.ndarray, times: list, epoch_interval: float, tol: float
     order = np.lexsort((ev_r, ev_m, ev_e))
     ev_e, ev_m, ev_r, ev_t = ev_e[order], ev_m[order], ev_r[order], ev_t[order]
     ptr = np.searchsorted(ev_e, np.arange(ep.size + 1))
-    # high-rate events at the nearest IMU sample (row 0 is the initial state: never an event)
-    hj, hm, hr = [], [], []
-    for k, tm in enumerate(high_rate_times or []):
-        tm = np.asarray(tm, float)
-        rows = np.nonzero((tm > t[0] - tol) & (tm <= t[-1] + tol))[0]
-        j = np.clip(np.searchsorted(t, tm[rows]), 1, t.size - 1)
-        j = np.where(np.abs(t[j] - tm[rows]) <= np.abs(t[j - 1] - tm[rows]), j, j - 1)
-        keep = j >= 1
-        hj.append(j[keep])
-        hm.append(np.full(int(keep.sum()), k))
-        hr.append(rows[keep])
-    if hj:
-        hj_a = np.concatenate(hj).astype(np.int64)
-        hm_a = np.concatenate(hm).astype(np.int64)
-        hr_a = np.concatenate(hr).astype(np.int64)
-        o = np.lexsort((hr_a, hm_a, hj_a))
-        hj_a, hm_a, hr_a = hj_a[o], hm_a[o], hr_a[o]
-    else:
-        hj_a = hm_a = hr_a = np.empty(0, np.int64)
-    hr_ptr = np.searchsorted(hj_a, np.arange(t.size + 1)).astype(np.int64)
-    dense = np.zeros(ep.size, bool)
-    n_dense = 0
-    if hj_a.size:
-        # segment e holds samples with epochs[e-1] < t_j <= epochs[e]
-        seg = np.searchsorted(ep, t[hj_a], side="left")
-        dense[np.unique(seg[(seg >= 1) & (seg < ep.size)])] = True
-        lo = np.searchsorted(t, ep[:-1], side="right")
-        hi = np.searchsorted(t, ep[1:], side="right")
-        n_dense = int(np.sum((hi - lo)[dense[1:]]))
+    hr_ptr, hm_a, hr_a, dense, n_dense = _high_rate_events(
+        t, ep, [np.asarray(tm, float) for tm in high_rate_times or []], tol)
     return Schedule(ep, ev_m, ev_r, ev_t, ptr, hr_ptr, hm_a, hr_a, dense, n_dense)
+
+
+def _high_rate_events(t, ep, times: list, tol: float):
+    """High-rate events at the IMU sample nearest their time (row 0 is the initial state: never
+    an event), ordered by (sample, measurement, row): ``hr_ptr, hr_m, hr_r``, the dense flags of
+    the epoch segments and the number of IMU samples inside dense segments."""
+    k = len(times)
+    sizes = np.array([x.size for x in times], np.int64)
+    ptr = np.zeros(k + 1, np.int64)
+    np.cumsum(sizes, out=ptr[1:])
+    allt = np.concatenate(times) if k else np.empty(0)
+    return _hr_events_kernel(t, ep, allt, ptr, tol)
+
+
+@njit(cache=True)
+def _hr_events_kernel(t, ep, allt, ptr, tol):
+    """Compiled core of :func:`_high_rate_events` (``allt``: the times of every high-rate
+    measurement, measurement ``k`` at ``ptr[k]:ptr[k+1]``): the nearest sample of each event
+    (ties to the later one), a stable counting sort by sample (events of one sample keep the
+    measurement, then row, order), and the segments of ``ep`` that hold an event."""
+    n = t.shape[0]
+    ne = allt.shape[0]
+    jev = np.full(ne, -1, np.int64)
+    count = np.zeros(n + 1, np.int64)
+    j = 0  # np.searchsorted(t, x) (left), by a forward scan while the times increase
+    x_prev = np.inf
+    for e in range(ne):
+        x = allt[e]
+        if not (x > t[0] - tol and x <= t[-1] + tol):
+            continue
+        if x < x_prev:
+            j = np.searchsorted(t, x)
+        else:
+            while j < n and t[j] < x:
+                j += 1
+        x_prev = x
+        j = min(max(j, 1), n - 1)
+        if abs(t[j] - x) > abs(t[j - 1] - x):
+            j -= 1
+        if j >= 1:
+            jev[e] = j
+            count[j + 1] += 1
+    hr_ptr = np.cumsum(count)
+    fill = hr_ptr[:-1].copy()
+    total = hr_ptr[n]
+    hm = np.empty(total, np.int64)
+    hr = np.empty(total, np.int64)
+    for m in range(ptr.shape[0] - 1):
+        for e in range(ptr[m], ptr[m + 1]):
+            j = jev[e]
+            if j >= 0:
+                q = fill[j]
+                hm[q] = m
+                hr[q] = e - ptr[m]
+                fill[j] = q + 1
+    # the events of one sample in (measurement, row) order: already, as the rows of each
+    # measurement are visited in increasing order and the measurements in order
+    n_ep = ep.shape[0]
+    dense = np.zeros(n_ep, np.bool_)
+    # segment e holds samples with ep[e-1] < t_j <= ep[e]
+    s = 0  # np.searchsorted(ep, t[j]) (left), advanced with j
+    for j in range(1, n):
+        while s < n_ep and ep[s] < t[j]:
+            s += 1
+        if hr_ptr[j + 1] > hr_ptr[j] and s >= 1 and s < n_ep:
+            dense[s] = True
+    n_dense = 0
+    for e in range(1, n_ep):
+        if dense[e]:
+            lo = np.searchsorted(t, ep[e - 1], side="right")
+            hi = np.searchsorted(t, ep[e], side="right")
+            n_dense += hi - lo
+    return hr_ptr, hm, hr, dense, n_dense
