@@ -492,9 +492,11 @@ def gait_period(stat: np.ndarray, dt: float, shortest: float = 0.4, longest: flo
     if n < 4 or b - a < 3:
         return float("nan")
     x = x - x.mean()
-    nfft = next_fast_len(2 * n - 1)  # linear (not circular) autocorrelation at lags < n
+    # linear (not circular) autocorrelation at the lags <= b: a circular one of length >= n + b
+    # has no wrapped products there (x[i] x[i + k - L] needs i >= L - k >= n)
+    nfft = next_fast_len(n + b + 1)
     f = np.fft.rfft(x, nfft)
-    ac = np.fft.irfft(f * np.conj(f), nfft)[:n]
+    ac = np.fft.irfft(f * np.conj(f), nfft)[:b + 1]
     if not ac[0] > 0:
         return float("nan")
     seg = ac[a:b + 1] / ac[0]
