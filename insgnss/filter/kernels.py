@@ -56,7 +56,8 @@ def store_nav_wander(nav_out, j, Cne, h, vel, C, buf):
 _euler_dcm = euler_to_dcm_nb  # one compiled implementation (insgnss.attitude)
 
 
-@njit(cache=True)
+# inline="always": called at every IMU sample of the high-rate path (highrate._model_step)
+@njit(cache=True, inline="always")
 def interval_step(
     pos,
     vel,
