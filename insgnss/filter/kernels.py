@@ -534,6 +534,22 @@ def _euler_std(C, P, o, out):
     out[2] = np.sqrt(max(v2, 0.0))
 
 
+@njit(cache=True, inline="always")
+def correct_position_velocity(nav, j, x, out):
+    """Row ``j`` of ``out`` (lat, lon, height, vel_e, vel_n, vel_u) = the nominal row ``j`` of
+    ``nav`` corrected by the error state ``x`` (ENU position error [m] in ``x[0:3]``, velocity
+    error in ``x[3:6]``; errors are nominal minus true): ``lat - dn / (M + h)``,
+    ``lon - de / ((N + h) cos lat)``, ``h - du``, ``v - dv``."""
+    lat = nav[j, 0]
+    h = nav[j, 2]
+    M, N = radii(lat)
+    out[j, 0] = lat - x[1] / (M + h)
+    out[j, 1] = nav[j, 1] - x[0] / ((N + h) * np.cos(lat))
+    out[j, 2] = h - x[2]
+    for i in range(3):
+        out[j, 3 + i] = nav[j, 3 + i] - x[3 + i]
+
+
 @njit(cache=True)
 def assemble_output(
     t,
@@ -639,14 +655,8 @@ def assemble_output(
             ep = e - 1
         _euler_dcm(nav_in[j, 6], nav_in[j, 7], nav_in[j, 8], C)
         if correct:
-            lat = nav_in[j, 0]
-            h = nav_in[j, 2]
-            M, N = radii(lat)
-            out[j, 0] = lat - x[1] / (M + h)
-            out[j, 1] = nav_in[j, 1] - x[0] / ((N + h) * np.cos(lat))
-            out[j, 2] = h - x[2]
+            correct_position_velocity(nav_in, j, x, out)
             for i in range(3):
-                out[j, 3 + i] = nav_in[j, 3 + i] - x[3 + i]
                 phi[i] = -x[6 + i]
             rotvec_to_dcm_nb(phi, R)
             for r in range(3):

@@ -111,6 +111,7 @@ from ..mechanization.riss import (
 )
 from ..mechanization.strapdown import NAV_COLS, NavState
 from .engine import FilterConfig, FilterResult, run_engine
+from .kernels import correct_position_velocity
 from .measurements import NominalState, Zaru
 from .models import NamedBlocks, StateLayout
 from .process import ProcessModelBase
@@ -951,13 +952,7 @@ def _assemble_kernel(t, out_st, out_aux, seg, is_ep, ep_t, P_start, P_end, X_sta
         kk = np.sin(r) * np.tan(p)
         for a in range(NB):
             Jrb[a] = (Jrb[a] + kk * Jpb[a]) / cr
-        lat, h = out_st[k, 0], out_st[k, 2]
-        M, N = radii(lat)
-        out[k, 0] = lat - x[1] / (M + h)
-        out[k, 1] = out_st[k, 1] - x[0] / ((N + h) * np.cos(lat))
-        out[k, 2] = h - x[2]
-        for i in range(3):
-            out[k, 3 + i] = out_st[k, 3 + i] - x[3 + i]
+        correct_position_velocity(out_st, k, x, out)
         dp = 0.0
         dr = 0.0
         vp = 0.0
