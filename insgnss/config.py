@@ -459,6 +459,10 @@ SCHEMA: dict[str, Any] = {
                                            "takes part in the time-offset estimate [m/s]",
                                            check=POSITIVE,
                                            when=_on("inputs.imu.estimate_time_offset")),
+            "estimate_time_drift": _spec(bool, True, "also estimate a linear drift of the "
+                                         "IMU-GNSS offset (the IMU time base's rate error), "
+                                         "applied only where the log shows it",
+                                         when=_on("inputs.imu.estimate_time_offset")),
             "axis_map": _spec(str, None, 'sensor -> body axis map, e.g. "y,x,-z"', when=CSV,
                               check=_via("three signed distinct axes, a proper rotation",
                                          _check_axis_map)),

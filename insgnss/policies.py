@@ -255,18 +255,20 @@ def gap_noise(imu: pd.DataFrame, gaps: list[dict]) -> pd.DataFrame | None:
                         index=pd.Index(a[:, 0], name="time"))
 
 
-def shift_report(report: dict, dt: float) -> dict:
-    """The report of :func:`check_imu_table` with its times moved by ``dt`` [s] (an IMU time
-    offset applied after the check)."""
+def shift_report(report: dict, dt) -> dict:
+    """The report of :func:`check_imu_table` with its times moved by ``dt`` [s], or mapped
+    through ``dt`` when it is callable (:class:`insgnss.preprocess.TimeCorrection`: an IMU
+    time correction applied after the check)."""
     if not dt:
         return report
+    move = (lambda x: float(dt(x))) if callable(dt) else (lambda x: x + dt)
     out = dict(report)
-    out["gaps"] = [dict(g, start=g["start"] + dt, end=g["end"] + dt) for g in report["gaps"]]
-    out["dropped_duplicates"] = [dict(d, time=d["time"] + dt)
+    out["gaps"] = [dict(g, start=move(g["start"]), end=move(g["end"])) for g in report["gaps"]]
+    out["dropped_duplicates"] = [dict(d, time=move(d["time"]))
                                  for d in report["dropped_duplicates"]]
-    out["segments"] = [[a + dt, b + dt] for a, b in report["segments"]]
+    out["segments"] = [[move(a), move(b)] for a, b in report["segments"]]
     if "spikes" in report:
-        out["spikes"] = [dict(d, time=d["time"] + dt) for d in report["spikes"]]
+        out["spikes"] = [dict(d, time=move(d["time"])) for d in report["spikes"]]
     return out
 
 

@@ -15,6 +15,18 @@ windows (so it never uses withheld data), refined to sub-sample precision by a p
 the three best shifts. Corrected IMU time = IMU time + ``dt``. A best shift whose RMS is within
 :data:`TIME_TAG_EVIDENCE` (5 %) of the RMS at zero shift is no evidence of an offset (noisy
 positions make the course rate noise): the estimate is then 0 (``info["applied"]`` false).
+An increment (the mean rate over ``(t[k-1], t[k]]``) is compared at its interval's midpoint,
+a rate sample at its stamp (before: an increment table's offset came out about half an IMU
+interval early).
+
+The offset may drift: a logger that stamps the IMU samples by counting them at the nominal rate
+(or scales the IMU's counter onto a time-tag span) runs at the IMU oscillator's rate error
+against GPS time; the rtklibexplorer drive drifts by -0.33 ms/s (-0.15 s over its 8 minutes,
+the offsets of its 100 s stretches fall from -0.006 to -0.126 s). :func:`estimate_time_correction`
+(the job's estimate, ``inputs.imu.estimate_time_drift``) fits ``offset + drift (t - t_ref)``
+to the offsets of the log's stretches when their t-statistic shows one
+(:class:`TimeCorrection`); the stretches' agreement is also the evidence of a constant offset
+on RTK-quality logs, where a real offset can gain less than the 5 % RMS margin.
 
 GNSS position outliers (a float solution jumping tens of metres) make the central-difference
 course rate absurd at the neighbouring epochs; they are excluded before the fit: epochs whose
@@ -64,13 +76,15 @@ no estimate (fewer than 3 independent clusters at ``tau``).
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 import pandas as pd
 
 from .detect import imu_rates, regular_samples
 from .earth import geodetic_to_enu
 from .errors import InvalidValueError
-from .imu import ImuErrorModel
+from .imu import ImuErrorModel, is_increment_table
 from .outages import in_windows
 from .stats import chi2_ppf
 from .validate import check_time_overlap
@@ -78,6 +92,93 @@ from .validate import check_time_overlap
 #: a time shift (IMU offset, velocity lag) is applied only when it lowers the RMS misfit by this
 #: share against no shift (otherwise the data cannot tell: noisy or static data, correct tags)
 TIME_TAG_EVIDENCE = 0.05
+#: the stretches of a log whose offsets are the evidence of a time correction: at least this
+#: many, and a t-statistic of the drift (or of the mean offset) against their scatter of at
+#: least :data:`DRIFT_T_MIN` (:func:`estimate_time_correction`)
+DRIFT_MIN_WINDOWS = 4
+DRIFT_T_MIN = 5.0
+
+
+class _CourseRateMatch:
+    """The GNSS course rate and the gyro yaw rate of a log, prepared once for the time-offset
+    fits (:func:`estimate_time_offset`, :func:`estimate_time_correction`; module docstring)."""
+
+    def __init__(self, imu: pd.DataFrame, gnss: pd.DataFrame, windows, min_speed: float,
+                 search: float):
+        check_time_overlap(imu, gnss)
+        tg = gnss.index.to_numpy(float)
+        e, n, _ = geodetic_to_enu(gnss["lat"].to_numpy(), gnss["lon"].to_numpy(),
+                                  gnss["height"].to_numpy(), float(gnss["lat"].iloc[0]),
+                                  float(gnss["lon"].iloc[0]), float(gnss["height"].iloc[0]))
+        # central differences over neighbouring epochs; only where both neighbours are 'close'
+        ve, vn = np.gradient(e, tg), np.gradient(n, tg)
+        speed = np.hypot(ve, vn)
+        course_rate = np.gradient(np.unwrap(np.arctan2(ve, vn)), tg)
+        span = np.gradient(tg) * 2.0  # the time span the central difference covers
+        gap_ok = np.r_[False, np.diff(tg) < 1.5 * np.median(np.diff(tg))]
+        gap_ok &= np.r_[gap_ok[1:], False]
+        ok = (speed > min_speed) & gap_ok & ~in_windows(tg, list(windows))
+        t, w, _ = imu_rates(imu)
+        ok &= (tg - span > t[0] + search) & (tg + span < t[-1] - search)
+        if is_increment_table(imu):  # an increment is the mean rate of (t[k-1], t[k]]: its
+            # midpoint is its time (rates are sampled at their stamps)
+            t = t - 0.5 * np.diff(t, prepend=2.0 * t[0] - t[min(1, t.size - 1)])
+        self.t = t
+        self.cs = np.concatenate([[0.0], np.cumsum(-w[:, 2])])  # yaw rate: -w_z (RFU body)
+        self.tc, self.half, self.cr = tg[ok], 0.5 * span[ok], course_rate[ok]
+        self.src = gnss.attrs.get("source")
+
+    def check(self, sel, min_speed: float, search: float) -> None:
+        """Raise :class:`InvalidValueError` when the epochs ``sel`` cannot tell an offset."""
+        n = int(sel.sum())
+        if n < 50:
+            raise InvalidValueError(
+                "too few moving GNSS epochs to estimate the IMU-GNSS time offset", file=self.src,
+                expected=f">= 50 epochs faster than {min_speed:g} m/s inside the IMU span (less "
+                         f"{search:g} s at each end), outside outages and gaps",
+                found=f"{n} epochs")
+        if np.std(self.cr[sel]) < np.radians(1.0):
+            raise InvalidValueError(
+                "too little turning motion to estimate the IMU-GNSS time offset", file=self.src,
+                expected="a course-rate spread >= 1 deg/s over the moving epochs",
+                found=f"{np.degrees(np.std(self.cr[sel])):.3g} deg/s over {n} epochs")
+
+    def mean_rate(self, tt, half):
+        a = np.searchsorted(self.t, tt - half)
+        b = np.searchsorted(self.t, tt + half)
+        return (self.cs[b] - self.cs[a]) / np.maximum(b - a, 1)
+
+    def fit(self, sel, shifts: np.ndarray, base=None) -> tuple[float, dict]:
+        """The best of the constant ``shifts`` over the epochs ``sel`` (added to ``base``, a
+        time-varying shift per epoch, when given), refined by a parabola through the three
+        best; ``(dt, info)`` with the RMS misfit at the best shift and at a zero shift."""
+        tc, half, cr = self.tc[sel], self.half[sel], self.cr[sel]
+        b0 = np.zeros(tc.size) if base is None else base[sel]
+
+        def inliers(shift):
+            r = cr - self.mean_rate(tc - b0 - shift, half)
+            d = np.abs(r - np.median(r))
+            return d <= max(5.0 * 1.4826 * float(np.median(d)), np.radians(5.0))
+
+        use = inliers(0.0)
+        for _ in range(2):  # inliers at zero shift, then at the first estimate
+            # IMU stamp t_imu holds the motion at t_imu + dt: GNSS at tc against IMU at tc - dt
+            rms = np.array([np.sqrt(np.mean((cr[use] - self.mean_rate(
+                tc[use] - b0[use] - s, half[use])) ** 2)) for s in shifts])
+            k = int(np.argmin(rms))
+            use = inliers(float(shifts[k]))
+        dt = float(shifts[k])
+        if 0 < k < len(shifts) - 1:
+            y0, y1, y2 = rms[k - 1], rms[k], rms[k + 1]
+            den = y0 - 2 * y1 + y2
+            if den > 0:
+                dt += 0.5 * (shifts[1] - shifts[0]) * (y0 - y2) / den
+        r0 = float(rms[np.argmin(np.abs(shifts))])
+        return dt, {"epochs": int(sel.sum()), "outliers": int(sel.sum() - use.sum()),
+                    "rms_rate_deg_s": float(np.degrees(rms[k])),
+                    "rms_rate_at_zero_deg_s": float(np.degrees(r0)),
+                    "at_search_edge": bool(k in (0, len(shifts) - 1)),
+                    "evidence": bool(r0 - float(rms[k]) > TIME_TAG_EVIDENCE * float(rms[k]))}
 
 
 def estimate_time_offset(imu: pd.DataFrame, gnss: pd.DataFrame, windows=(), *,
@@ -90,75 +191,132 @@ def estimate_time_offset(imu: pd.DataFrame, gnss: pd.DataFrame, windows=(), *,
     (both spans printed), :class:`InvalidValueError` when too few GNSS epochs are moving or
     there is too little turning motion to tell.
     """
-    check_time_overlap(imu, gnss)
-    tg = gnss.index.to_numpy(float)
-    e, n, _ = geodetic_to_enu(gnss["lat"].to_numpy(), gnss["lon"].to_numpy(),
-                              gnss["height"].to_numpy(), float(gnss["lat"].iloc[0]),
-                              float(gnss["lon"].iloc[0]), float(gnss["height"].iloc[0]))
-    # central differences over neighbouring epochs; only where both neighbours are 'close'
-    ve, vn = np.gradient(e, tg), np.gradient(n, tg)
-    speed = np.hypot(ve, vn)
-    course_rate = np.gradient(np.unwrap(np.arctan2(ve, vn)), tg)
-    span = np.gradient(tg) * 2.0  # the time span the central difference covers
-    gap_ok = np.r_[False, np.diff(tg) < 1.5 * np.median(np.diff(tg))]
-    gap_ok &= np.r_[gap_ok[1:], False]
-    ok = (speed > min_speed) & gap_ok & ~in_windows(tg, list(windows))
-    t, w, _ = imu_rates(imu)
-    ok &= (tg - span > t[0] + search) & (tg + span < t[-1] - search)
-    src = gnss.attrs.get("source")
-    if ok.sum() < 50:
-        raise InvalidValueError(
-            "too few moving GNSS epochs to estimate the IMU-GNSS time offset", file=src,
-            expected=f">= 50 epochs faster than {min_speed:g} m/s inside the IMU span (less "
-                     f"{search:g} s at each end), outside outages and gaps",
-            found=f"{int(ok.sum())} epochs")
-    if np.std(course_rate[ok]) < np.radians(1.0):
-        raise InvalidValueError(
-            "too little turning motion to estimate the IMU-GNSS time offset", file=src,
-            expected="a course-rate spread >= 1 deg/s over the moving epochs",
-            found=f"{np.degrees(np.std(course_rate[ok])):.3g} deg/s over {int(ok.sum())} "
-                  "epochs")
-    yaw = -w[:, 2]
-    cs = np.concatenate([[0.0], np.cumsum(yaw)])
-
-    def mean_rate(tt, half):
-        a = np.searchsorted(t, tt - half)
-        b = np.searchsorted(t, tt + half)
-        return (cs[b] - cs[a]) / np.maximum(b - a, 1)
-
-    tc, half, cr = tg[ok], 0.5 * span[ok], course_rate[ok]
-    shifts = np.arange(-search, search + step / 2, step)
-
-    def inliers(shift):
-        r = cr - mean_rate(tc - shift, half)
-        d = np.abs(r - np.median(r))
-        return d <= max(5.0 * 1.4826 * float(np.median(d)), np.radians(5.0))
-
-    use = inliers(0.0)
-    for _ in range(2):  # inliers at zero shift, then at the first estimate
-        # IMU stamp t_imu holds the motion at t_imu + dt: compare GNSS at tc with IMU at tc - dt
-        rms = np.array([np.sqrt(np.mean((cr[use] - mean_rate(tc[use] - s, half[use])) ** 2))
-                        for s in shifts])
-        k = int(np.argmin(rms))
-        use = inliers(float(shifts[k]))
-    dt = float(shifts[k])
-    if 0 < k < len(shifts) - 1:
-        y0, y1, y2 = rms[k - 1], rms[k], rms[k + 1]
-        den = y0 - 2 * y1 + y2
-        if den > 0:
-            dt += 0.5 * step * (y0 - y2) / den
-    r0 = float(rms[np.argmin(np.abs(shifts))])
-    info = {"epochs": int(ok.sum()), "outliers": int(ok.sum() - use.sum()),
-            "rms_rate_deg_s": float(np.degrees(rms[k])),
-            "rms_rate_at_zero_deg_s": float(np.degrees(r0)),
-            "at_search_edge": bool(k in (0, len(shifts) - 1))}
+    m = _CourseRateMatch(imu, gnss, windows, min_speed, search)
+    sel = np.ones(m.tc.size, bool)
+    m.check(sel, min_speed, search)
+    dt, info = m.fit(sel, np.arange(-search, search + step / 2, step))
     # noisy positions (a single-point fix at 1 Hz) make the course rate noise: a best shift
     # that hardly beats no shift is no evidence of an offset
-    info["applied"] = bool(r0 - float(rms[k]) > TIME_TAG_EVIDENCE * float(rms[k]))
+    info["applied"] = info.pop("evidence")
     if not info["applied"]:
         info["reason"] = "no evidence of an offset"
         return 0.0, info
     return dt, info
+
+
+@dataclass(frozen=True)
+class TimeCorrection:
+    """Correction of IMU time stamps: ``corrected = t + offset + drift (t - t_ref)`` [s, s, s/s].
+
+    ``drift`` is the rate error of the IMU's time base against GNSS time (a logger that counts
+    samples at a nominal rate, or scales its counter onto a time-tag span, drifts by the
+    oscillator's tolerance: 300 ppm is 0.18 s in 10 minutes)."""
+
+    offset: float = 0.0
+    drift: float = 0.0
+    t_ref: float = 0.0
+
+    def __call__(self, t):
+        return t + self.offset + self.drift * (np.asarray(t, float) - self.t_ref)
+
+    def __bool__(self) -> bool:
+        return bool(self.offset or self.drift)
+
+
+def estimate_time_correction(imu: pd.DataFrame, gnss: pd.DataFrame, windows=(), *,
+                             min_speed: float = 3.0, search: float = 0.5, step: float = 0.005,
+                             drift: bool = True, drift_window: float = 100.0
+                             ) -> tuple[TimeCorrection, dict]:
+    """IMU time correction from the gyro yaw rate against the GNSS course rate: a constant
+    offset and, with ``drift``, a linear drift of it (module docstring, "Time offset").
+
+    The log is cut into ``drift_window``-long stretches (non-overlapping); the offset of each
+    that can tell one (at least 50 moving epochs, a course-rate spread of 1 deg/s) is searched
+    within ``search / 2`` of the whole-log offset. With at least :data:`DRIFT_MIN_WINDOWS` of
+    them their offsets are the evidence: ``a + b (t - t_ref)`` by weighted least squares
+    (weights: epochs; ``t_ref`` their weighted mean time); the drift ``b`` is applied when its
+    t-statistic against the residual scatter reaches :data:`DRIFT_T_MIN`, it moves the offset
+    by two search steps over the log and the pair, refitted over the whole log, fits it better
+    than a constant; otherwise the whole-log constant offset is applied when the stretches'
+    mean offset reaches the same t-statistic or the whole-log RMS margin
+    (:data:`TIME_TAG_EVIDENCE`) holds. A shorter log has only the RMS margin
+    (:func:`estimate_time_offset`). On RTK-quality positions the stretches agree to a few
+    milliseconds while a constant offset may gain less than the margin in RMS: the margin was
+    made for noisy single-point positions, whose stretches scatter. Returns
+    ``(correction, info)``: ``info`` has the whole-log fit's keys, ``drift_windows`` (time,
+    offset, epochs of each stretch), ``offset_t``, ``drift_t``, ``drift_ppm`` and
+    ``drift_applied``. Raises as :func:`estimate_time_offset`.
+    """
+    m = _CourseRateMatch(imu, gnss, windows, min_speed, search)
+    sel = np.ones(m.tc.size, bool)
+    m.check(sel, min_speed, search)
+    shifts = np.arange(-search, search + step / 2, step)
+    dt, info = m.fit(sel, shifts)
+    rms_margin = info.pop("evidence")
+    info.update(applied=False, drift_applied=False, drift_ppm=0.0)
+    rows = _stretch_offsets(m, dt, shifts, search, step, drift_window)
+    info["drift_windows"] = [list(r) for r in rows]
+    if len(rows) < DRIFT_MIN_WINDOWS:  # too short to tell by stretches: the RMS margin
+        info["applied"] = rms_margin
+        if not rms_margin:
+            info["reason"] = "no evidence of an offset"
+        return TimeCorrection(dt if rms_margin else 0.0), info
+    tw, y, wt = (np.array(c, float) for c in zip(*rows, strict=True))
+    wt = wt / wt.mean()
+    t_ref = float(np.sum(wt * tw) / np.sum(wt))
+    # the offset: the stretches' weighted mean against their scatter (t-statistic)
+    mean = float(np.sum(wt * y) / np.sum(wt))
+    s2c = max(float(np.sum(wt * (y - mean) ** 2)) / (tw.size - 1), (0.2 * step) ** 2)
+    t_off = abs(mean) / np.sqrt(s2c / np.sum(wt))
+    # the drift: a + b (t - t_ref) by weighted least squares (t_ref the weighted mean time:
+    # intercept and slope uncorrelated)
+    X = np.column_stack([np.ones(tw.size), tw - t_ref])
+    A = X.T @ (wt[:, None] * X)
+    beta = np.linalg.solve(A, X.T @ (wt * y))
+    res = y - X @ beta
+    s2 = max(float(np.sum(wt * res**2)) / (tw.size - 2), (0.2 * step) ** 2)
+    b = float(beta[1])
+    t_b = abs(b) / float(np.sqrt(s2 * np.linalg.inv(A)[1, 1]))
+    change = abs(b) * float(m.tc[-1] - m.tc[0])
+    info.update(offset_t=t_off, drift_t=t_b, drift_fit_ppm=b * 1e6,
+                drift_residual_rms_s=float(np.sqrt(np.sum(wt * res**2) / np.sum(wt))))
+    if drift and t_b >= DRIFT_T_MIN and change >= 2.0 * step:
+        # the offset over the whole log with the drift applied: the pair must fit the whole
+        # log better than the constant offset does
+        off, inf = m.fit(sel, shifts, base=b * (m.tc - t_ref))
+        if inf["rms_rate_deg_s"] < info["rms_rate_deg_s"]:
+            info.update(applied=True, drift_applied=True, drift_ppm=b * 1e6, t_ref=t_ref,
+                        offset_at_t_ref=off, rms_rate_deg_s=inf["rms_rate_deg_s"])
+            return TimeCorrection(off, b, t_ref), info
+        info["drift_reason"] = "the drifting offset does not fit better than a constant one"
+    elif drift:
+        info["drift_reason"] = (f"no evidence of a drift (t = {t_b:.2g}, offset change "
+                                f"{change:.3g} s over the log)")
+    info["applied"] = bool(rms_margin or t_off >= DRIFT_T_MIN)
+    if not info["applied"]:
+        info["reason"] = f"no evidence of an offset (t = {t_off:.2g} over the stretches)"
+    return TimeCorrection(dt if info["applied"] else 0.0), info
+
+
+def _stretch_offsets(m: _CourseRateMatch, dt: float, shifts: np.ndarray, search: float,
+                     step: float, window: float) -> list[tuple[float, float, int]]:
+    """``(mean time, offset, epochs)`` of each ``window``-long stretch of the log that can tell
+    an offset (at least 50 moving epochs, a course-rate spread of 1 deg/s, a best shift inside
+    the search range): searched at ``step`` within ``search / 2`` of the whole-log offset
+    ``dt``, then refined to a fifth of the step."""
+    rows = []
+    local = dt + np.arange(-0.5 * search, 0.5 * search + step / 2, step)
+    fine = step / 5.0
+    for a in np.arange(m.tc[0], m.tc[-1], window):
+        s = (m.tc >= a) & (m.tc < a + window)
+        if s.sum() < 50 or np.std(m.cr[s]) < np.radians(1.0):
+            continue
+        d, inf = m.fit(s, local)
+        if inf["at_search_edge"]:
+            continue
+        d, _ = m.fit(s, d + np.arange(-2.0 * step, 2.0 * step + fine / 2, fine))
+        rows.append((float(np.mean(m.tc[s])), d, int(s.sum())))
+    return rows
 
 
 
@@ -322,8 +480,11 @@ def with_static_noise(model: ImuErrorModel, imu_static: pd.DataFrame) -> ImuErro
     return model.scaled(gyro_arw=max(model.gyro_arw, arw), accel_vrw=max(model.accel_vrw, vrw))
 
 
-def shift_time(df: pd.DataFrame, dt: float) -> pd.DataFrame:
-    """Copy with ``dt`` added to the time index (attrs kept)."""
-    out = df.set_axis(df.index + dt, axis=0)
+def shift_time(df: pd.DataFrame, dt) -> pd.DataFrame:
+    """Copy with ``dt`` added to the time index (attrs kept); ``dt`` a number [s] or a
+    :class:`TimeCorrection` (the index mapped through it)."""
+    idx = dt(df.index.to_numpy(float)) if isinstance(dt, TimeCorrection) else df.index + dt
+    out = df.set_axis(pd.Index(idx, name=df.index.name) if isinstance(dt, TimeCorrection)
+                      else idx, axis=0)
     out.attrs = dict(df.attrs)
     return out

@@ -11,7 +11,12 @@ from pathlib import Path
 from ..config import Job, check_job_against_data
 from ..errors import InvalidValueError
 from ..policies import apply_spike_policy, check_imu_table, gap_policy, shift_report
-from ..preprocess import estimate_time_offset, estimate_velocity_lag, shift_time
+from ..preprocess import (
+    TimeCorrection,
+    estimate_time_correction,
+    estimate_velocity_lag,
+    shift_time,
+)
 from ..validate import warn
 from .context import RunContext
 from .inputs import Inputs, imu_model, load_inputs
@@ -52,12 +57,15 @@ def prepare(job: Job, *, progress: bool | None = None, seed: int | None = None,
     windows = outage_windows(job, all_gnss)
     preprocessing = {} if window is None else {"processing_window": list(window)}
     if job["inputs"]["imu"]["estimate_time_offset"] and inputs.gnss is not None:
-        dt, info = _time_offset(job, inputs, windows)
-        inputs.imu = shift_time(inputs.imu, dt)
-        imu_report = shift_report(imu_report, dt)
+        corr, info = _time_offset(job, inputs, windows)
+        inputs.imu = shift_time(inputs.imu, corr)
+        imu_report = shift_report(imu_report, corr)
         inputs.imu.attrs.update({k: imu_report[k] for k in ("gaps", "segments",
                                                             "dropped_duplicates")})
-        preprocessing["imu_time_offset_estimated_s"] = dt
+        preprocessing["imu_time_offset_estimated_s"] = corr.offset
+        if corr.drift:
+            preprocessing["imu_time_drift_ppm"] = corr.drift * 1e6
+            preprocessing["imu_time_offset_reference_s"] = corr.t_ref
         preprocessing["imu_time_offset_info"] = info
     g = inputs.gnss
     if job["inputs"]["gnss"]["estimate_velocity_lag"] and g is not None and "vel_e" in g.columns \
@@ -73,21 +81,24 @@ def prepare(job: Job, *, progress: bool | None = None, seed: int | None = None,
                       spill_dir=None if spill_dir is None else Path(spill_dir))
 
 
-def _time_offset(job: Job, inputs: Inputs, windows) -> tuple[float, dict]:
-    """IMU-GNSS time offset (:func:`insgnss.preprocess.estimate_time_offset`). A job that asks
-    for the estimate itself gets the error when the data cannot support one (too little motion
-    or turning); when the request comes from the platform profile, the run warns and keeps the
-    recorded time tags (offset 0), as the velocity-lag estimate does without evidence."""
+def _time_offset(job: Job, inputs: Inputs, windows) -> tuple[TimeCorrection, dict]:
+    """IMU-GNSS time offset and its drift (:func:`insgnss.preprocess.
+    estimate_time_correction`). A job that asks for the estimate itself gets the error when the
+    data cannot support one (too little motion or turning); when the request comes from the
+    platform profile, the run warns and keeps the recorded time tags (offset 0), as the
+    velocity-lag estimate does without evidence."""
     key = "inputs.imu.estimate_time_offset"
+    i = job["inputs"]["imu"]
     try:
-        return estimate_time_offset(inputs.imu, inputs.gnss, windows,
-                                    min_speed=job["inputs"]["imu"]["time_offset_min_speed"])
+        return estimate_time_correction(inputs.imu, inputs.gnss, windows,
+                                        min_speed=i["time_offset_min_speed"],
+                                        drift=i["estimate_time_drift"])
     except InvalidValueError as e:
         if key in job.given:
             raise
         warn(f"the platform profile's IMU-GNSS time-offset estimate is skipped and the time "
              f"tags are kept: {e}", file=job.path, column=key)
-        return 0.0, {"applied": False, "reason": str(e)}
+        return TimeCorrection(), {"applied": False, "reason": str(e)}
 
 
 def run_job(job: Job, *, progress: bool | None = None, seed: int | None = None,
