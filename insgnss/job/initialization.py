@@ -286,7 +286,9 @@ def _initialize(job: Job, inputs: Inputs, model: ImuErrorModel, windows) -> Init
         else:
             r, p = np.radians(given[0]), np.radians(given[1] or 0.0)
         C = euler_to_dcm(r, p, hdg)
-        t_imu = float(imu.index[imu.index.get_indexer([t_s], method="nearest")[0]])
+        # the first IMU sample at or after the epoch: its position is interpolated between
+        # this epoch and the next (the one before may be withheld: an outage window)
+        t_imu = float(imu.index[min(int(imu.index.searchsorted(t_s, "left")), len(imu) - 1)])
         # a horizontal-only GNSS velocity (NMEA) starts with zero vertical velocity, inside
         # the initial velocity sigma of a vehicle on a road grade
         vel = np.zeros(3)
