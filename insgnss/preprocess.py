@@ -124,6 +124,7 @@ class _CourseRateMatch:
             # midpoint is its time (rates are sampled at their stamps)
             t = t - 0.5 * np.diff(t, prepend=2.0 * t[0] - t[min(1, t.size - 1)])
         self.t = t
+        self.t_mid = 0.5 * float(imu.index[0] + imu.index[-1])  # the log's middle (stamps)
         self.cs = np.concatenate([[0.0], np.cumsum(-w[:, 2])])  # yaw rate: -w_z (RFU body)
         self.tc, self.half, self.cr = tg[ok], 0.5 * span[ok], course_rate[ok]
         self.src = gnss.attrs.get("source")
@@ -234,7 +235,8 @@ def estimate_time_correction(imu: pd.DataFrame, gnss: pd.DataFrame, windows=(), 
     that can tell one (at least 50 moving epochs, a course-rate spread of 1 deg/s) is searched
     within ``search / 2`` of the whole-log offset. With at least :data:`DRIFT_MIN_WINDOWS` of
     them their offsets are the evidence: ``a + b (t - t_ref)`` by weighted least squares
-    (weights: epochs; ``t_ref`` their weighted mean time); the drift ``b`` is applied when its
+    (weights: epochs; ``t_ref`` their weighted mean time); the drift ``b`` is applied (the
+    correction's ``t_ref`` then the middle of the IMU log) when its
     t-statistic against the residual scatter reaches :data:`DRIFT_T_MIN`, it moves the offset
     by two search steps over the log and the pair, refitted over the whole log, fits it better
     than a constant; otherwise the whole-log constant offset is applied when the stretches'
@@ -281,13 +283,18 @@ def estimate_time_correction(imu: pd.DataFrame, gnss: pd.DataFrame, windows=(), 
     info.update(offset_t=t_off, drift_t=t_b, drift_fit_ppm=b * 1e6,
                 drift_residual_rms_s=float(np.sqrt(np.sum(wt * res**2) / np.sum(wt))))
     if drift and t_b >= DRIFT_T_MIN and change >= 2.0 * step:
-        # the offset over the whole log with the drift applied: the pair must fit the whole
-        # log better than the constant offset does
-        off, inf = m.fit(sel, shifts, base=b * (m.tc - t_ref))
+        # the offset over the whole log with the drift applied, at the log's middle (a fixed
+        # reference: the stretches' mean time moves with the epochs they keep): the pair must
+        # fit the whole log better than the constant offset does
+        base = b * (m.tc - m.t_mid)
+        off, inf = m.fit(sel, shifts, base=base)
+        fine = step / 5.0  # refined as the stretches are
+        off, inf = m.fit(sel, off + np.arange(-2.0 * step, 2.0 * step + fine / 2, fine),
+                         base=base)
         if inf["rms_rate_deg_s"] < info["rms_rate_deg_s"]:
-            info.update(applied=True, drift_applied=True, drift_ppm=b * 1e6, t_ref=t_ref,
+            info.update(applied=True, drift_applied=True, drift_ppm=b * 1e6, t_ref=m.t_mid,
                         offset_at_t_ref=off, rms_rate_deg_s=inf["rms_rate_deg_s"])
-            return TimeCorrection(off, b, t_ref), info
+            return TimeCorrection(off, b, m.t_mid), info
         info["drift_reason"] = "the drifting offset does not fit better than a constant one"
     elif drift:
         info["drift_reason"] = (f"no evidence of a drift (t = {t_b:.2g}, offset change "

@@ -320,7 +320,9 @@ def test_drive_gyro_spike_named_in_the_stop_and_bridged(drive):
     import re
 
     # in the processed time base: the IMU stamps moved by the estimated IMU-GNSS time offset
-    dt = s["preprocessing"].get("imu_time_offset_estimated_s", 0.0)
+    pre = s["preprocessing"]
+    dt = pre.get("imu_time_offset_estimated_s", 0.0) + 1e-6 * pre.get("imu_time_drift_ppm", 0.0) \
+        * (ts - pre.get("imu_time_offset_reference_s", ts))  # and its drift (preprocess.py)
     t_named = float(re.search(r"gyro sample at t = ([0-9.]+) s", s["error"]).group(1))
     assert t_named == pytest.approx(ts + dt, abs=1e-4) and "5000 deg/s" in s["error"]
     assert "spike_policy" in s["error"]
