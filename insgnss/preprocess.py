@@ -181,6 +181,17 @@ class _CourseRateMatch:
                     "at_search_edge": bool(k in (0, len(shifts) - 1)),
                     "evidence": bool(r0 - float(rms[k]) > TIME_TAG_EVIDENCE * float(rms[k]))}
 
+    def fit_fine(self, sel, shifts: np.ndarray, step: float, base=None) -> tuple[float, dict]:
+        """:meth:`fit` over ``shifts``, then again at a fifth of ``step`` within two steps of
+        its best (the parabola through a coarse grid can move by a few milliseconds)."""
+        d, info = self.fit(sel, shifts, base)
+        if info["at_search_edge"]:
+            return d, info
+        fine = step / 5.0
+        d2, info2 = self.fit(sel, d + np.arange(-2.0 * step, 2.0 * step + fine / 2, fine), base)
+        info2["at_search_edge"] = False
+        return d2, info2
+
 
 def estimate_time_offset(imu: pd.DataFrame, gnss: pd.DataFrame, windows=(), *,
                          min_speed: float = 3.0, search: float = 0.5, step: float = 0.005
@@ -256,7 +267,7 @@ def estimate_time_correction(imu: pd.DataFrame, gnss: pd.DataFrame, windows=(), 
     dt, info = m.fit(sel, shifts)
     rms_margin = info.pop("evidence")
     info.update(applied=False, drift_applied=False, drift_ppm=0.0)
-    rows = _stretch_offsets(m, dt, shifts, search, step, drift_window)
+    rows = _stretch_offsets(m, dt, search, step, drift_window)
     info["drift_windows"] = [list(r) for r in rows]
     if len(rows) < DRIFT_MIN_WINDOWS:  # too short to tell by stretches: the RMS margin
         info["applied"] = rms_margin
@@ -286,11 +297,7 @@ def estimate_time_correction(imu: pd.DataFrame, gnss: pd.DataFrame, windows=(), 
         # the offset over the whole log with the drift applied, at the log's middle (a fixed
         # reference: the stretches' mean time moves with the epochs they keep): the pair must
         # fit the whole log better than the constant offset does
-        base = b * (m.tc - m.t_mid)
-        off, inf = m.fit(sel, shifts, base=base)
-        fine = step / 5.0  # refined as the stretches are
-        off, inf = m.fit(sel, off + np.arange(-2.0 * step, 2.0 * step + fine / 2, fine),
-                         base=base)
+        off, inf = m.fit_fine(sel, shifts, step, base=b * (m.tc - m.t_mid))
         if inf["rms_rate_deg_s"] < info["rms_rate_deg_s"]:
             info.update(applied=True, drift_applied=True, drift_ppm=b * 1e6, t_ref=m.t_mid,
                         offset_at_t_ref=off, rms_rate_deg_s=inf["rms_rate_deg_s"])
@@ -305,27 +312,22 @@ def estimate_time_correction(imu: pd.DataFrame, gnss: pd.DataFrame, windows=(), 
     return TimeCorrection(dt if info["applied"] else 0.0), info
 
 
-def _stretch_offsets(m: _CourseRateMatch, dt: float, shifts: np.ndarray, search: float,
-                     step: float, window: float) -> list[tuple[float, float, int]]:
+def _stretch_offsets(m: _CourseRateMatch, dt: float, search: float, step: float,
+                     window: float) -> list[tuple[float, float, int]]:
     """``(mean time, offset, epochs)`` of each ``window``-long stretch of the log that can tell
     an offset (at least 50 moving epochs, a course-rate spread of 1 deg/s, a best shift inside
     the search range): searched at ``step`` within ``search / 2`` of the whole-log offset
     ``dt``, then refined to a fifth of the step."""
     rows = []
     local = dt + np.arange(-0.5 * search, 0.5 * search + step / 2, step)
-    fine = step / 5.0
     for a in np.arange(m.tc[0], m.tc[-1], window):
         s = (m.tc >= a) & (m.tc < a + window)
         if s.sum() < 50 or np.std(m.cr[s]) < np.radians(1.0):
             continue
-        d, inf = m.fit(s, local)
-        if inf["at_search_edge"]:
-            continue
-        d, _ = m.fit(s, d + np.arange(-2.0 * step, 2.0 * step + fine / 2, fine))
-        rows.append((float(np.mean(m.tc[s])), d, int(s.sum())))
+        d, inf = m.fit_fine(s, local, step)
+        if not inf["at_search_edge"]:
+            rows.append((float(np.mean(m.tc[s])), d, int(s.sum())))
     return rows
-
-
 
 
 def estimate_velocity_lag(gnss: pd.DataFrame, windows=(), *, steps: int = 50
@@ -490,8 +492,10 @@ def with_static_noise(model: ImuErrorModel, imu_static: pd.DataFrame) -> ImuErro
 def shift_time(df: pd.DataFrame, dt) -> pd.DataFrame:
     """Copy with ``dt`` added to the time index (attrs kept); ``dt`` a number [s] or a
     :class:`TimeCorrection` (the index mapped through it)."""
-    idx = dt(df.index.to_numpy(float)) if isinstance(dt, TimeCorrection) else df.index + dt
-    out = df.set_axis(pd.Index(idx, name=df.index.name) if isinstance(dt, TimeCorrection)
-                      else idx, axis=0)
+    if isinstance(dt, TimeCorrection):
+        idx = pd.Index(dt(df.index.to_numpy(float)), name=df.index.name)
+    else:
+        idx = df.index + dt
+    out = df.set_axis(idx, axis=0)
     out.attrs = dict(df.attrs)
     return out
