@@ -24,18 +24,17 @@ from __future__ import annotations
 
 import os
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
 
-import matplotlib
+import numpy as np
+import pandas as pd
 
-matplotlib.use("Agg", force=False)
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
-import pandas as pd  # noqa: E402
-from matplotlib.figure import Figure  # noqa: E402
+from .earth import geodetic_to_enu
+from .io.native import atomic_write
+from .report_data import time_origin
 
-from .earth import geodetic_to_enu  # noqa: E402
-from .io.native import atomic_write  # noqa: E402
-from .report_data import time_origin  # noqa: E402
+if TYPE_CHECKING:
+    from matplotlib.figure import Figure
 
 DISPLAY_POINTS = 4000  #: points kept per series for display (min/max of DISPLAY_POINTS/2 buckets)
 SOLUTION_COLORS = {"forward": "#1f77b4", "smoothed": "#d62728", "reference": "#444444"}
@@ -44,6 +43,13 @@ FLAG_COLOR = "#ff7f0e"
 REJECT_COLOR = "#d62728"
 SIGMA_COLOR = "#7f7f7f"
 OUTAGE_COLOR = "#e377c2"
+#: matplotlib's qualitative colour maps "tab10" and "tab20" (one colour per outage window; the
+#: specs are built without matplotlib, which only the drawing imports)
+TAB10 = ("#1f77b4", "#ff7f0e", "#2ca02c", "#d62728", "#9467bd", "#8c564b", "#e377c2",
+         "#7f7f7f", "#bcbd22", "#17becf")
+TAB20 = ("#1f77b4", "#aec7e8", "#ff7f0e", "#ffbb78", "#2ca02c", "#98df8a", "#d62728",
+         "#ff9896", "#9467bd", "#c5b0d5", "#8c564b", "#c49c94", "#e377c2", "#f7b6d2",
+         "#7f7f7f", "#c7c7c7", "#bcbd22", "#dbdb8d", "#17becf", "#9edae5")
 #: paper style: 9 pt text, thin lines, light grid (applied while a figure is drawn)
 STYLE = {"font.size": 8.5, "axes.titlesize": 9, "axes.labelsize": 8.5, "legend.fontsize": 7.5,
          "xtick.labelsize": 8, "ytick.labelsize": 8, "axes.grid": True, "grid.alpha": 0.3,
@@ -360,7 +366,7 @@ def drift_spec(data) -> FigureSpec | None:
         return None
     sols = list(dict.fromkeys(d["solution"]))
     panels = []
-    cmap = plt.get_cmap("tab10" if len(data.windows) <= 10 else "tab20")
+    cmap = TAB10 if len(data.windows) <= 10 else TAB20
     for row in ("horizontal", "percent"):
         for name in sols:
             ds = d[d["solution"] == name]
@@ -371,7 +377,7 @@ def drift_spec(data) -> FigureSpec | None:
                       xlabel="time since outage start [s]" if row == "percent" else "",
                       legend="right" if name == sols[-1] else "none")
             for w, g in ds.groupby("outage"):
-                col = matplotlib.colors.to_hex(cmap(int(w) % cmap.N))
+                col = cmap[int(w) % len(cmap)]
                 t = g["t_rel"].to_numpy(float)
                 dist = float(np.nanmax(g["distance"].to_numpy(float)))
                 if row == "horizontal":
@@ -664,7 +670,20 @@ def report_specs(data) -> list[FigureSpec]:
 _DASH = {"solid": "-", "dashed": "--", "dotted": ":", "dashdot": "-."}
 
 
+def mpl():
+    """matplotlib, imported on the first drawing with the Agg backend unless one was chosen
+    (the specifications, which the interactive page draws too, need none of it: a run without
+    static figures, or whose figures are drawn by worker processes, never imports it)."""
+    import matplotlib
+
+    matplotlib.use("Agg", force=False)
+    import matplotlib.pyplot  # noqa: F401  (matplotlib.pyplot below)
+
+    return matplotlib
+
+
 def _draw(ax, p: Panel, fig):
+    matplotlib = mpl()
     from matplotlib.collections import LineCollection
 
     if p.shade:  # every outage window in one collection (one axvspan each costs 20 ms)
@@ -758,7 +777,9 @@ def _margins(spec: FigureSpec, n_legend: int) -> dict:
 
 def render(spec: FigureSpec) -> Figure:
     """Draw a :class:`FigureSpec` with matplotlib (paper style, :data:`STYLE`)."""
-    with plt.rc_context(STYLE):
+    from matplotlib.figure import Figure
+
+    with mpl().pyplot.rc_context(STYLE):
         height = spec.row_height * spec.rows + 0.8
         fig = Figure(figsize=(WIDTH, height))
         axes = fig.subplots(spec.rows, spec.cols, squeeze=False,
@@ -861,7 +882,7 @@ def navigation_figure(traj: pd.DataFrame, title: str = "") -> Figure:
     enu = local_enu(traj)
     i = minmax_indices(enu[:, 0], enu[:, 1], traj["height"].to_numpy(float))
     t, enu, traj = t[i], enu[i], traj.iloc[i]
-    fig, ax = plt.subplots(2, 2, figsize=(11, 7.5), layout="constrained")
+    fig, ax = mpl().pyplot.subplots(2, 2, figsize=(11, 7.5), layout="constrained")
     ax[0, 0].plot(enu[:, 0], enu[:, 1], lw=1.0)
     ax[0, 0].plot(enu[0, 0], enu[0, 1], "go", label="start")
     ax[0, 0].plot(enu[-1, 0], enu[-1, 1], "rs", label="end")
@@ -893,4 +914,4 @@ def save_figure(fig: Figure, path: str | os.PathLike, dpi: int = 150) -> None:
     """Save a figure atomically (format from the file extension) and close it."""
     fmt = os.path.splitext(str(path))[1].lstrip(".") or "png"
     atomic_write(path, lambda p: fig.savefig(p, dpi=dpi, format=fmt))
-    plt.close(fig)
+    mpl().pyplot.close(fig)

@@ -341,21 +341,25 @@ def _png_bytes(fig) -> bytes:
 _WORK: tuple | None = None
 
 
-def _figure(i: int) -> bytes:
-    """Draw figure ``i`` of :data:`_WORK`, write its files ``[(ext, path), ...]`` and return
-    its PNG bytes."""
+def _draw_figure(spec, files) -> bytes:
+    """Draw one figure, write its files ``[(ext, path), ...]`` and return its PNG bytes."""
     from .plots import render
 
-    specs, files = _WORK[:2]
-    fig = render(specs[i])
+    fig = render(spec)
     png = _png_bytes(fig)
     fig.set_layout_engine(None)  # laid out once; further formats only draw
-    for ext, path in files[i]:
+    for ext, path in files:
         if ext == "png":
             atomic_write(path, lambda p, b=png: Path(p).write_bytes(b))
         else:
             atomic_write(path, lambda p, e=ext: fig.savefig(p, format=e))
     return png
+
+
+def _figure(i: int) -> bytes:
+    """Draw figure ``i`` of :data:`_WORK` (:func:`_draw_figure`)."""
+    specs, files = _WORK[:2]
+    return _draw_figure(specs[i], files[i])
 
 
 def figure_cost(spec) -> int:
@@ -390,11 +394,119 @@ def figure_workers(n_figures: int) -> int:
 
     if n_figures < 4 or "fork" not in multiprocessing.get_all_start_methods():
         return 0
+    return max(0, min(_cores() - 1, 3, n_figures // 2))
+
+
+def _cores() -> int:
     try:
-        cores = len(os.sched_getaffinity(0))
+        return len(os.sched_getaffinity(0))
     except AttributeError:  # not on Linux
-        cores = os.cpu_count() or 1
-    return max(0, min(cores - 1, 3, n_figures // 2))
+        return os.cpu_count() or 1
+
+
+#: the figure server forked ahead of the report by :func:`start_figure_workers`:
+#: ``(process, connection)``
+_SERVER = None
+
+
+def _warm() -> None:
+    """Import matplotlib and lay out one text (font files and caches load on the first text
+    drawn), so that what follows only draws."""
+    from matplotlib.figure import Figure
+
+    from .plots import mpl
+
+    mpl()
+    fig = Figure(figsize=(1, 1))
+    fig.text(0.5, 0.5, "0.5 m")
+    fig.canvas.draw()
+
+
+def _figure_server(conn, parent_end) -> None:
+    """The figure server: warm up, wait for ``(specs, files)`` and answer with their PNG bytes
+    (:func:`_draw_figures`: this process and its forked helpers, which inherit the warm
+    matplotlib); exit when the run closes the connection instead."""
+    parent_end.close()
+    try:
+        _warm()
+        specs, files = conn.recv()
+    except (EOFError, OSError, KeyboardInterrupt):
+        return
+    try:
+        conn.send(_draw_figures(specs, files))
+    except Exception:  # noqa: BLE001 - the run draws the figures itself and reports the error
+        pass
+    finally:
+        conn.close()
+
+
+def start_figure_workers() -> bool:
+    """Fork the process that will draw the report's figures now, before the run: it imports
+    matplotlib (0.5-1 s) and loads its fonts on another core while this process reads the data
+    and runs the filter. :func:`write_report` then sends it the figures (it forks its helpers
+    then, warm: :func:`figure_workers`) and writes the interactive page meanwhile. None with a
+    single core or without ``fork``; returns whether it started. :func:`stop_figure_workers`
+    ends it (``insgnss process`` does, whatever happens)."""
+    global _SERVER
+    import multiprocessing
+
+    if _SERVER is not None:
+        return True
+    if _cores() < 2 or "fork" not in multiprocessing.get_all_start_methods():
+        return False
+    ctx = multiprocessing.get_context("fork")
+    here, there = ctx.Pipe()
+    proc = ctx.Process(target=_figure_server, args=(there, here), name="insgnss-figures")
+    proc.start()
+    there.close()
+    _SERVER = (proc, here)
+    return True
+
+
+def stop_figure_workers() -> None:
+    """End the process of :func:`start_figure_workers` (at once if it is still drawing)."""
+    global _SERVER
+    server, _SERVER = _SERVER, None
+    if server is None:
+        return
+    proc, conn = server
+    conn.close()  # an idle server exits on it
+    proc.join(5.0)
+    if proc.is_alive():
+        proc.terminate()
+        proc.join()
+
+
+def _once(f):
+    done = []
+
+    def run():
+        if not done:
+            done.append(True)
+            f()
+    return run
+
+
+def _draw_by_server(specs, files, while_drawing) -> list[bytes] | None:
+    """The figures drawn by the process of :func:`start_figure_workers`, ``while_drawing()``
+    run here meanwhile; ``None`` when no such process runs or it failed (the caller draws
+    them itself, and so reports any error)."""
+    if _SERVER is None:
+        return None
+    proc, conn = _SERVER
+    try:
+        conn.send((specs, files))
+    except (OSError, ValueError):  # it died
+        stop_figure_workers()
+        return None
+    try:
+        if while_drawing is not None:
+            while_drawing()
+        return conn.recv()
+    except (EOFError, OSError):
+        return None
+    finally:
+        stop_figure_workers()
 
 
 def _draw_figures(specs, files, while_drawing=None) -> list[bytes]:
@@ -409,6 +521,11 @@ def _draw_figures(specs, files, while_drawing=None) -> list[bytes]:
     global _WORK
     import multiprocessing
 
+    if while_drawing is not None:
+        while_drawing = _once(while_drawing)  # not again should the server fail
+    pngs = _draw_by_server(specs, files, while_drawing)
+    if pngs is not None:
+        return pngs
     order = sorted(range(len(specs)), key=lambda i: -figure_cost(specs[i]))  # stable
     workers = figure_workers(len(specs))
     ctx = multiprocessing.get_context("fork") if workers else multiprocessing

@@ -36,6 +36,12 @@ def test_gnss_a_day_late_with_time_offset_estimation_names_the_missing_overlap(
     assert "imu.csv" in err and "gnss.csv" in err
     assert "86400" in err  # the GNSS span, from 86400 s
     assert "IMU from 0" in err
+    import multiprocessing
+
+    import insgnss.report as rep
+
+    # the report's figure server, forked before the run, ended with the failed run
+    assert rep._SERVER is None and not multiprocessing.active_children()
 
 
 def test_no_overlap_is_the_same_message_without_estimation(recording):

@@ -43,3 +43,8 @@ def test_foot_preset_job_runs_from_the_cli(pyshoe_dir, tmp_path):
     n = min(len(d_sol), len(d_true))
     assert np.sqrt(np.mean((d_sol[:n] - d_true[:n]) ** 2)) < 0.3
     assert (out / "report.html").exists()
+    import multiprocessing
+
+    import insgnss.report as rep
+
+    assert rep._SERVER is None and not multiprocessing.active_children()  # the figure server

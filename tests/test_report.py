@@ -392,3 +392,78 @@ def test_figures_shared_queue_largest_first(monkeypatch, workers):
         assert pids == {os.getpid()}
         starts = [float(r[2]) for r in rows]
         assert sorted(range(len(specs)), key=starts.__getitem__) == [1, 3, 6, 4, 5, 2, 0]
+
+
+# --- the figure server of insgnss process (issue 15) -------------------------------------------
+def _small_specs():
+    from insgnss.plots import FigureSpec, Panel, Trace
+
+    t = np.linspace(0.0, 10.0, 50)
+    return [FigureSpec(f"fig{k}", f"figure {k}", "",
+                       [Panel(title="p", traces=[Trace("line", x=t, y=np.sin(t + k))])], 1)
+            for k in range(5)]
+
+
+def test_figure_server_draws_the_same_figures(tmp_path):
+    """Figures drawn by the server forked ahead of the run are byte-identical to those drawn
+    in the run's own process, their files are written, the interactive page is written once
+    meanwhile, and the server is gone afterwards."""
+    import multiprocessing
+
+    import insgnss.report as rep
+
+    if "fork" not in multiprocessing.get_all_start_methods() or rep._cores() < 2:
+        pytest.skip("the figure server needs fork and two cores")
+    specs = _small_specs()
+    own = rep._draw_figures(specs, [[] for _ in specs])
+    assert rep.start_figure_workers() and rep.start_figure_workers()  # once
+    proc = rep._SERVER[0]
+    seen = []
+    files = [[("png", tmp_path / f"{s.key}.png")] for s in specs]
+    served = rep._draw_figures(specs, files, lambda: seen.append(proc.is_alive()))
+    assert seen == [True] and rep._SERVER is None and not proc.is_alive()
+    assert served == own
+    assert [(tmp_path / f"{s.key}.png").read_bytes() for s in specs] == own
+
+
+def test_figure_server_lost_or_unused(tmp_path):
+    """A server that died is replaced by drawing here (the interactive page written once); one
+    the run never uses exits when stopped."""
+    import multiprocessing
+
+    import insgnss.report as rep
+
+    if "fork" not in multiprocessing.get_all_start_methods() or rep._cores() < 2:
+        pytest.skip("the figure server needs fork and two cores")
+    specs = _small_specs()[:2]
+    rep.start_figure_workers()
+    proc = rep._SERVER[0]
+    proc.kill()
+    proc.join()
+    seen = []
+    pngs = rep._draw_figures(specs, [[] for _ in specs], lambda: seen.append(1))
+    assert seen == [1] and len(pngs) == 2 and pngs[0].startswith(b"\x89PNG")
+    assert rep._SERVER is None
+    rep.start_figure_workers()
+    proc = rep._SERVER[0]
+    rep.stop_figure_workers()
+    assert not proc.is_alive() and proc.exitcode == 0 and rep._SERVER is None
+
+
+def test_figure_specs_need_no_matplotlib():
+    """Building the report's specifications and its interactive page imports no matplotlib
+    (the figure server draws); the outage colours are matplotlib's tab10 / tab20."""
+    import subprocess
+    import sys
+
+    code = ("import sys, insgnss.report, insgnss.plots, insgnss.report_interactive; "
+            "print('matplotlib' in sys.modules)")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert out.stdout.strip() == "False"
+    import matplotlib
+
+    from insgnss.plots import TAB10, TAB20
+
+    for name, ours in (("tab10", TAB10), ("tab20", TAB20)):
+        cmap = matplotlib.colormaps[name]
+        assert [matplotlib.colors.to_hex(cmap(i)) for i in range(cmap.N)] == list(ours)

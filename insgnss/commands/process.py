@@ -50,9 +50,19 @@ def run(args: argparse.Namespace) -> int:
         job.settings["outputs"]["report"] = False
     out = args.output or job.output_dir
     with output_folder(args, out, protect=job.input_paths(), names=output_names()):
-        res = run_job(job, progress=False if args.no_progress else None, seed=args.seed,
-                      spill_dir=out)
-        paths = write_outputs(res, out)
+        if job["outputs"]["report"]:
+            # the report's figure workers import matplotlib on the other cores meanwhile
+            from ..report import start_figure_workers
+
+            start_figure_workers()
+        try:
+            res = run_job(job, progress=False if args.no_progress else None, seed=args.seed,
+                          spill_dir=out)
+            paths = write_outputs(res, out)
+        finally:
+            from ..report import stop_figure_workers
+
+            stop_figure_workers()
     print_summary(res)
     print(f"wrote {len(paths)} files to {out}")
     if not res.summary["complete"]:
