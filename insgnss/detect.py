@@ -115,7 +115,6 @@ from dataclasses import asdict, dataclass, fields
 import numpy as np
 import pandas as pd
 from numba import njit
-from scipy.fft import next_fast_len
 
 from .errors import ConfigError
 from .imu import ACCEL_COLS, DTHETA_COLS, DV_COLS, GYRO_COLS, is_increment_table
@@ -124,6 +123,20 @@ METHODS = ("shoe", "amv", "are", "mag", "adaptive", "valley")
 #: methods built on the SHOE statistic
 SHOE_METHODS = ("shoe", "adaptive", "valley")
 G_STANDARD = 9.80665
+
+
+def next_fast_len(target: int) -> int:
+    """Smallest length ``>= target`` whose prime factors are 2, 3, 5, 7 and 11 (fast for
+    numpy's pocketfft; ``scipy.fft.next_fast_len``, without importing scipy)."""
+    n = max(int(target), 1)
+    while True:
+        m = n
+        for f in (2, 3, 5, 7, 11):
+            while m % f == 0:
+                m //= f
+        if m == 1:
+            return n
+        n += 1
 
 
 # --- compiled statistics ---------------------------------------------------------------------

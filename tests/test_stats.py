@@ -43,3 +43,33 @@ def test_no_scipy_stats_import():
             "print('scipy.stats' in sys.modules)")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     assert out.stdout.strip() == "False"
+
+
+def test_random_degrees_of_freedom_and_far_tails_match_scipy():
+    """Non-integer degrees of freedom from 0.2 to 30,000 and probabilities down to 1e-12 in
+    either tail (the Halley steps on Q above the median keep the upper tail's digits)."""
+    rng = np.random.default_rng(7)
+    n = 2000
+    k = np.exp(rng.uniform(np.log(0.2), np.log(30000.0), n))
+    tail = 10.0 ** rng.uniform(-12.0, -0.3, n)
+    p = np.where(rng.random(n) < 0.5, tail, 1.0 - tail)
+    x = chi2_ppf(p, k)
+    np.testing.assert_allclose(x, stats.chi2.ppf(p, k), rtol=1e-12)
+    np.testing.assert_allclose(chi2_cdf(x, k), stats.chi2.cdf(x, k), rtol=1e-11)
+    assert chi2_cdf(np.inf, 3) == 1.0 and np.isnan(chi2_cdf(np.nan, 3))
+
+
+def test_no_scipy_on_the_process_path():
+    """No scipy subpackage is imported by the filter, the job run and the report's data
+    (scipy.special and scipy.fft alone cost about 0.3 s of every start-up; numba imports the
+    bare package, a few milliseconds)."""
+    import subprocess
+    import sys
+
+    code = ("import sys, insgnss.cli, insgnss.pipeline, insgnss.report, insgnss.foot; "
+            "heavy = ('special', 'fft', 'stats', 'linalg', 'signal', 'interpolate', 'integrate', "
+            "'optimize', 'sparse'); "
+            "print(sorted(m for m in sys.modules if m.split('.')[0] == 'scipy' and "
+            "m.split('.')[1:2] and m.split('.')[1] in heavy))")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert out.stdout.strip() == "[]"
