@@ -228,6 +228,9 @@ class Run:
 
 def child_env(cache_dir: str | None = None) -> dict:
     env = dict(os.environ)
+    # as a user runs it: Python writes and reuses the bytecode of the modules it imports (a
+    # sandbox may set PYTHONDONTWRITEBYTECODE, which recompiles every insgnss module each run)
+    env.pop("PYTHONDONTWRITEBYTECODE", None)
     env["PYTHONPATH"] = os.pathsep.join([str(CODE), *filter(None, [env.get("PYTHONPATH")])])
     if cache_dir is not None:
         env["NUMBA_CACHE_DIR"] = cache_dir

@@ -434,8 +434,8 @@ def _figure_server(conn, parent_end) -> None:
         return
     try:
         conn.send(_draw_figures(specs, files))
-    except Exception:  # noqa: BLE001 - the run draws the figures itself and reports the error
-        pass
+    except (Exception, KeyboardInterrupt):  # noqa: BLE001 - the run draws the figures itself
+        pass                                # and so reports the error; Ctrl-C ends the run
     finally:
         conn.close()
 

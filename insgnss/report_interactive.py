@@ -174,10 +174,28 @@ def _clean(x):
     return x
 
 
-def _rgba(color: str | None, alpha: float) -> str:
+#: the named colours of the figure specifications (matplotlib's single-letter names)
+_NAMED = {"k": "#000000", "black": "#000000", "w": "#ffffff", "white": "#ffffff"}
+
+
+def _rgb(color: str) -> tuple[float, float, float]:
+    """``(r, g, b)`` in 0..1 of ``#rgb``, ``#rrggbb`` or a name of :data:`_NAMED` without
+    importing matplotlib (the page is written while the figure server draws; another colour
+    goes through ``matplotlib.colors.to_rgb``)."""
+    c = _NAMED.get(color, color)
+    if c.startswith("#") and len(c) in (4, 7):
+        h = c[1:] if len(c) == 7 else "".join(ch * 2 for ch in c[1:])
+        try:
+            return tuple(int(h[i:i + 2], 16) / 255 for i in (0, 2, 4))
+        except ValueError:
+            pass
     from matplotlib.colors import to_rgb
 
-    r, g, b = (int(255 * v) for v in to_rgb(color or "#888888"))
+    return to_rgb(color)
+
+
+def _rgba(color: str | None, alpha: float) -> str:
+    r, g, b = (int(255 * v) for v in _rgb(color or "#888888"))
     return f"rgba({r},{g},{b},{alpha})"
 
 

@@ -456,7 +456,8 @@ def test_figure_specs_need_no_matplotlib():
     import subprocess
     import sys
 
-    code = ("import sys, insgnss.report, insgnss.plots, insgnss.report_interactive; "
+    code = ("import sys, insgnss.report, insgnss.plots, insgnss.report_interactive as ri; "
+            "c = [ri._rgba(x, 0.3) for x in ('#7f7f7f', 'k', '#abc')]; "
             "print('matplotlib' in sys.modules)")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     assert out.stdout.strip() == "False"
@@ -467,3 +468,7 @@ def test_figure_specs_need_no_matplotlib():
     for name, ours in (("tab10", TAB10), ("tab20", TAB20)):
         cmap = matplotlib.colormaps[name]
         assert [matplotlib.colors.to_hex(cmap(i)) for i in range(cmap.N)] == list(ours)
+    from insgnss.report_interactive import _rgb
+
+    for c in ("#7f7f7f", "#1f77b4", "k", "black", "w", "#abc", "tab:red"):
+        assert _rgb(c) == matplotlib.colors.to_rgb(c)
