@@ -47,12 +47,20 @@ def _warning_printer(command: str):
     """``warnings.formatwarning`` of the command line: one line per warning, ``insgnss
     COMMAND: warning: MESSAGE`` (the category in brackets unless it is an
     :class:`~insgnss.errors.InsgnssWarning`), without the Python file, line number and source
-    line a user cannot act on (the message names the data file, row and column)."""
+    line a user cannot act on (the message names the data file, row and column). A warning
+    already printed by this command is not printed again (the same check run twice, e.g. an
+    initialization repeated with the measured noise, said the same thing twice)."""
     from .errors import InsgnssWarning
+
+    printed: set[str] = set()
 
     def fmt(message, category, filename, lineno, line=None):
         kind = "" if issubclass(category, InsgnssWarning) else f" ({category.__name__})"
-        return f"insgnss {command}: warning{kind}: {message}\n"
+        text = f"insgnss {command}: warning{kind}: {message}\n"
+        if text in printed:
+            return ""
+        printed.add(text)
+        return text
 
     return fmt
 

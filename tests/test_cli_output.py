@@ -85,3 +85,19 @@ def test_warnings_without_source_lines(tmp_path):
     assert warn and all(x.startswith("insgnss process: warning: ") for x in warn), r.stderr
     assert any("duplicated time stamp" in x and "imu.csv" in x for x in warn)
     assert ".py:" not in r.stderr and "warn(" not in r.stderr  # no Python file, no source line
+    assert len(warn) == len(set(warn))  # each said once
+
+
+def test_a_warning_is_printed_once_per_command():
+    """The same warning from two places of one run (an initialization repeated with the
+    measured noise) is one line; another message, or another command, is printed."""
+
+    from insgnss.cli import _warning_printer
+    from insgnss.errors import InsgnssWarning
+
+    fmt = _warning_printer("process")
+    first = fmt(InsgnssWarning("no gyrocompassing"), InsgnssWarning, "a.py", 1)
+    assert first == "insgnss process: warning: no gyrocompassing\n"
+    assert fmt(InsgnssWarning("no gyrocompassing"), InsgnssWarning, "b.py", 9) == ""
+    assert fmt("other", UserWarning, "a.py", 1) == "insgnss process: warning (UserWarning): other\n"
+    assert _warning_printer("process")("no gyrocompassing", InsgnssWarning, "a.py", 1) == first
