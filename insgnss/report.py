@@ -464,14 +464,16 @@ def start_figure_workers() -> bool:
 
 
 def stop_figure_workers() -> None:
-    """End the process of :func:`start_figure_workers` (at once if it is still drawing)."""
+    """End the process of :func:`start_figure_workers`: a server that answered or waits for
+    figures exits on the closed connection; one still warming up or drawing for a run that
+    failed meanwhile is terminated after a second."""
     global _SERVER
     server, _SERVER = _SERVER, None
     if server is None:
         return
     proc, conn = server
-    conn.close()  # an idle server exits on it
-    proc.join(5.0)
+    conn.close()
+    proc.join(1.0)
     if proc.is_alive():
         proc.terminate()
         proc.join()

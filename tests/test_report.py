@@ -446,8 +446,8 @@ def test_figure_server_lost_or_unused(tmp_path):
     assert rep._SERVER is None
     rep.start_figure_workers()
     proc = rep._SERVER[0]
-    rep.stop_figure_workers()
-    assert not proc.is_alive() and proc.exitcode == 0 and rep._SERVER is None
+    rep.stop_figure_workers()  # exits on the closed connection, or terminated while warming
+    assert not proc.is_alive() and proc.exitcode in (0, -15) and rep._SERVER is None
 
 
 def test_figure_specs_need_no_matplotlib():
