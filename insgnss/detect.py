@@ -118,6 +118,7 @@ from numba import njit
 
 from .errors import ConfigError
 from .imu import ACCEL_COLS, DTHETA_COLS, DV_COLS, GYRO_COLS, is_increment_table
+from .validate import time_slice
 
 METHODS = ("shoe", "amv", "are", "mag", "adaptive", "valley")
 #: methods built on the SHOE statistic
@@ -1039,8 +1040,8 @@ class StaticWindows:
 
     def motion(self, t0: float, t1: float) -> tuple[float, float]:
         """Median specific-force and angular-rate variation [m/s^2, rad/s] over [t0, t1]."""
-        a = self.accel_std.loc[t0:t1].to_numpy()
-        w = self.rate_std.loc[t0:t1].to_numpy()
+        a = time_slice(self.accel_std, t0, t1).to_numpy()
+        w = time_slice(self.rate_std, t0, t1).to_numpy()
         return (float(np.median(a)) if a.size else np.nan,
                 float(np.median(w)) if w.size else np.nan)
 

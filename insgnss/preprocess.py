@@ -87,7 +87,7 @@ from .errors import InvalidValueError
 from .imu import ImuErrorModel, is_increment_table
 from .outages import in_windows
 from .stats import chi2_ppf
-from .validate import check_time_overlap
+from .validate import check_time_overlap, time_slice
 
 #: a time shift (IMU offset, velocity lag) is applied only when it lowers the RMS misfit by this
 #: share against no shift (otherwise the data cannot tell: noisy or static data, correct tags)
@@ -467,7 +467,7 @@ def vibration_noise(imu: pd.DataFrame, windows, model: ImuErrorModel, *,
     for a, b in windows:
         if b - a < min_window:
             continue
-        qg, qa, edf = vibration_density(imu.loc[a:b], tau)
+        qg, qa, edf = vibration_density(time_slice(imu, a, b), tau)
         xg = _significant_excess(qg, model.gyro_arw ** 2, edf)
         xa = _significant_excess(qa, model.accel_vrw ** 2, edf)
         if xg == 0.0 and xa == 0.0:

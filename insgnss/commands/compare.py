@@ -107,6 +107,7 @@ def _vehicle(args, job):
     from ..detect import DetectorConfig, detect_stillness
     from ..outages import in_windows
     from ..pipeline import filter_config, initialize, load_inputs, outage_windows, run_job
+    from ..validate import time_slice
 
     inputs = load_inputs(job, args.seed)
     # the job's own processing (all its aiding, outages and preprocessing; this also applies
@@ -128,7 +129,7 @@ def _vehicle(args, job):
         job_rejected.update(riss=jr_r.filter.rejected, riss_smoothed=jr_r.filter.rejected)
     model = inputs.imu_model
     init = initialize(job, inputs, model)
-    imu = inputs.imu.loc[init.state.time:]
+    imu = time_slice(inputs.imu, init.state.time)
     t = imu.index.to_numpy(float)
     a = job["aiding"]
     note = ""
@@ -152,7 +153,7 @@ def _vehicle(args, job):
         note = "default vehicle detector"
     cp = inputs.control_points
     if cp is None and inputs.truth is not None and "stationary" in inputs.truth.columns:
-        cp = control_points_at_stops(inputs.truth.loc[init.state.time:])
+        cp = control_points_at_stops(time_slice(inputs.truth, init.state.time))
     gnss = inputs.gnss
     if gnss is not None and len(gnss):
         gnss = gnss[~in_windows(gnss.index.to_numpy(float), outage_windows(job, gnss))]
@@ -167,7 +168,7 @@ def _vehicle(args, job):
     settings = _settings(args, False)
     if a["zupt_max_speed"] and note == "job detector":
         settings.max_speed = float(a["zupt_max_speed"])
-    res = compare_runs(imu, init.state, truth.loc[init.state.time:], still=still,
+    res = compare_runs(imu, init.state, time_slice(truth, init.state.time), still=still,
                        control_points=cp, gnss=gnss, gnss_lever_arm=inputs.lever_arm,
                        runs=_runs(args), config=cfg, settings=settings,
                        job_solutions=job_solutions, job_rejected=job_rejected,

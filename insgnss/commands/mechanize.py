@@ -85,7 +85,7 @@ def run(args: argparse.Namespace) -> int:
     from ..io.native import write_table
     from ..mechanization.core import frame_id
     from ..mechanization.strapdown import NavState, mechanize
-    from ..validate import ensure_not_input
+    from ..validate import ensure_not_input, time_slice
 
     if args.gravity_model not in GRAVITY_MODELS:
         raise ConfigError("unknown gravity model", column="--gravity-model",
@@ -108,7 +108,7 @@ def run(args: argparse.Namespace) -> int:
     lat, lon = np.radians(args.lat), np.radians(args.lon)
     t0 = float(imu.index[0])
     if args.align is not None:
-        window = imu.loc[: t0 + args.align]
+        window = time_slice(imu, None, t0 + args.align)
         model = grade(args.grade) if args.grade else None
         heading = None if args.heading is None else np.radians(args.heading)
         check_gyro_at_rest(window, model, file=src, column="--gyro-unit")
@@ -120,7 +120,7 @@ def run(args: argparse.Namespace) -> int:
         print(f"alignment over {args.align:g} s ({res.heading_source}): roll {d['roll']:.3f}, "
               f"pitch {d['pitch']:.3f}, heading {d['heading']:.3f} deg")
         x0 = NavState(lat, lon, args.height, np.zeros(3), res.C, res.time)
-        imu = imu.loc[res.time:]
+        imu = time_slice(imu, res.time)
     else:
         r, p_, h = np.radians(args.attitude)
         x0 = NavState.from_euler(lat, lon, args.height, args.velocity or (0.0, 0.0, 0.0), r,

@@ -62,7 +62,7 @@ from ..earth import earth_rate_l, enu_displacement_to_geodetic, geodetic_to_enu
 from ..errors import AlignmentError, ConfigError
 from ..imu import ACCEL_COLS, DV_COLS, GYRO_COLS, ImuErrorModel
 from ..mechanization.strapdown import NavState, mechanize
-from ..validate import warn
+from ..validate import time_slice, warn
 from .inputs import Inputs
 from .windows import describe_windows, outage_windows, outside_windows
 
@@ -219,7 +219,7 @@ def _initialize(job: Job, inputs: Inputs, model: ImuErrorModel, windows) -> Init
         windows = outage_windows(job, all_gnss)
     gnss = None if all_gnss is None else outside_windows(all_gnss, windows)
     t0 = float(imu.index[0]) if ini["start_time"] is None else float(ini["start_time"])
-    imu = imu.loc[t0:]
+    imu = time_slice(imu, t0)
     if len(imu) < 2:
         raise AlignmentError(f"no IMU data after the start time {t0:.3f} s (IMU "
                              f"{float(inputs.imu.index[0]):.3f} .. "
@@ -274,7 +274,7 @@ def _initialize(job: Job, inputs: Inputs, model: ImuErrorModel, windows) -> Init
             # 1 s around the epoch; after it when the GNSS before is withheld (an outage)
             acc = None
             for a0 in (t_s - 0.5, t_s):
-                win = imu.loc[a0: a0 + 1.0]
+                win = time_slice(imu, a0, a0 + 1.0)
                 tw = win.index.to_numpy(float)
                 acc = _mean_acceleration(gnss, float(tw[0]), float(tw[-1]))
                 if acc is not None:
@@ -472,7 +472,7 @@ def _static_window(job: Job, imu: pd.DataFrame, gnss, windows, t0: float):
                  f"{np.degrees(sw.rate_floor):.2f} deg/s; levelling averages that motion and "
                  "the IMU noise is not measured there", file=src,
                  column="initialization.static_duration")
-        return imu.loc[:t1], info, (t0, t1) if still is not None else None
+        return time_slice(imu, None, t1), info, (t0, t1) if still is not None else None
     stationary, still = sw.initial(t0, 0.5)
     if still is not None and still[1] - still[0] >= MIN_STATIC:
         a0, a1 = t0, still[1]
@@ -499,7 +499,7 @@ def _static_window(job: Job, imu: pd.DataFrame, gnss, windows, t0: float):
              f"{sw.accel_floor:.3f} m/s^2 and {np.degrees(sw.rate_floor):.2f} deg/s (a hand-held "
              "device?); levelling averages that motion and the IMU noise is not measured there",
              file=src, column="initialization.static_duration")
-    return imu.loc[a0:a1], info, (a0, a1) if truly else None
+    return time_slice(imu, a0, a1), info, (a0, a1) if truly else None
 
 
 def _heading_in_motion(job: Job, imu, gnss, res, w_mean, model: ImuErrorModel,
@@ -516,8 +516,8 @@ def _heading_in_motion(job: Job, imu, gnss, res, w_mean, model: ImuErrorModel,
     if gnss is None or len(gnss) < 3:
         return None
     t_s = res.time
-    still = gnss.loc[t_begin: t_s]
-    g = gnss.loc[np.nextafter(t_s, np.inf): t_s + MOTION_WINDOW]
+    still = time_slice(gnss, t_begin, t_s)
+    g = time_slice(gnss, np.nextafter(t_s, np.inf), t_s + MOTION_WINDOW)
     tg = g.index.to_numpy(float)
     if not len(still) or tg.size < 3:
         return None
@@ -529,7 +529,7 @@ def _heading_in_motion(job: Job, imu, gnss, res, w_mean, model: ImuErrorModel,
     e, n, _ = geodetic_to_enu(g["lat"].to_numpy(float), g["lon"].to_numpy(float),
                               g["height"].to_numpy(float), lat0, lon0, h0)
     y = np.column_stack([np.asarray(e), np.asarray(n)])
-    seg = imu.loc[t_s: min(float(tg[-1]) + 0.1, float(imu.index[-1]))].copy()
+    seg = time_slice(imu, t_s, min(float(tg[-1]) + 0.1, float(imu.index[-1]))).copy()
     if len(seg) < 3:
         return None
     C0 = euler_to_dcm(res.roll, res.pitch, 0.0)
@@ -583,7 +583,7 @@ def _heading_from_course(imu, gnss, all_gnss, windows, res, min_speed, w_mean,
     k = int(k[0])
     tm = float(gnss.index[k])
     course = float(np.arctan2(gnss["vel_e"].iloc[k], gnss["vel_n"].iloc[k]))
-    seg = imu.loc[res.time: tm]
+    seg = time_slice(imu, res.time, tm)
     if w_mean is not None and GYRO_COLS[0] in seg.columns:  # remove the static gyro bias
         seg = seg.copy()
         seg[GYRO_COLS] = seg[GYRO_COLS].to_numpy() - w_mean

@@ -40,7 +40,7 @@ from ..imu import ImuErrorModel, coning_sculling, increments, increments_table
 from ..io.spill import SpillAllocator, release, release_frame, trim_heap
 from ..policies import gap_noise, sample_rates
 from ..preprocess import vibration_noise, with_static_noise
-from ..validate import warn
+from ..validate import time_slice, warn
 from .aiding import (
     Aiding,
     applied_check,
@@ -110,7 +110,7 @@ def static_noise_model(ctx: RunContext, init: Initialization, model: ImuErrorMod
         warn(note, file=ctx.inputs.imu.attrs.get("source"), column="filter.noise_from_static")
         return model
     a, b = init.noise_window
-    model = with_static_noise(model, ctx.inputs.imu.loc[a:b])
+    model = with_static_noise(model, time_slice(ctx.inputs.imu, a, b))
     ctx.preprocessing["gyro_arw_deg_sqrt_h"] = float(np.degrees(model.gyro_arw) * 60)
     ctx.preprocessing["accel_vrw_m_s_sqrt_h"] = float(model.accel_vrw * 60)
     ctx.preprocessing["static_noise_window"] = [float(a), float(b)]
@@ -182,7 +182,7 @@ def _strapdown_filter(ctx: RunContext, tuned: Tuned, smoother: bool = True,
     job, inputs, model = tuned.job, tuned.inputs, tuned.model
     if init is None:
         init = initialize(job, inputs, model, tuned.windows)
-    imu = inputs.imu.loc[init.state.time:]
+    imu = time_slice(inputs.imu, init.state.time)
     aiding = build_aiding(job, inputs, tuned.windows, imu, _static_window(inputs, init))
     _record_still_threshold(ctx, aiding)
     aiding.require()
@@ -279,7 +279,7 @@ def _static_window(inputs, init: Initialization):
     """The IMU samples of the static initialization window (None without one)."""
     if init.static_end is None:
         return None
-    return inputs.imu.loc[init.state.time:init.static_end]
+    return time_slice(inputs.imu, init.state.time, init.static_end)
 
 
 def _record_still_threshold(ctx: RunContext, aiding) -> None:
@@ -340,7 +340,7 @@ def compile_before_progress(imu, state, models, cfg: FilterConfig) -> None:
     A warm-up that fails leaves the error to the real run."""
     from ..errors import InsgnssError
 
-    part = imu.loc[:float(imu.index[0]) + WARM_SPAN]
+    part = time_slice(imu, None, float(imu.index[0]) + WARM_SPAN)
     if len(part) < 3:
         return
     try:

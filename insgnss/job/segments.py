@@ -32,7 +32,7 @@ import pandas as pd
 
 from ..config import Job
 from ..errors import InsgnssError
-from ..validate import warn
+from ..validate import time_slice, warn
 from .context import RunContext
 from .evaluation import evaluate_result
 from .initialization import MAX_INTERPOLATION
@@ -106,7 +106,7 @@ def run_segments(ctx: RunContext, run_one: SegmentRunner) -> JobResult:
                 and "vel_e" in gnss.columns and len(gnss):
             # moving at the segment start (GNSS speed): start from GNSS position, velocity and
             # course; standing: the job's own method (e.g. a static alignment) first
-            g0 = outside_windows(gnss.loc[a:], windows)  # usable GNSS only
+            g0 = outside_windows(time_slice(gnss, a), windows)  # usable GNSS only
             moving = len(g0) and float(np.hypot(g0["vel_e"].iloc[0], g0["vel_n"].iloc[0])) > \
                 job["initialization"]["min_speed"]
             methods = ["gnss_velocity", None] if moving else [None, "gnss_velocity"]
