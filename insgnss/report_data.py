@@ -174,10 +174,17 @@ def _state_errors(sol: pd.DataFrame, ref: pd.DataFrame, kinds: tuple) -> tuple:
     times = r.index.to_numpy(float)
     # in blocks of epochs: the per-epoch temporaries (attitude matrices, the solution rows)
     # stay small on a long log; every quantity is formed epoch by epoch (the same numbers)
-    parts = [solution_errors(sample_at(sol, times[a:a + STATE_BLOCK]),
-                             r.iloc[a:a + STATE_BLOCK], times[a:a + STATE_BLOCK])
-             for a in range(0, max(times.size, 1), STATE_BLOCK)]
-    err, sig, x = (np.concatenate([p[k] for p in parts]) for k in range(3))
+    # written into arrays of the whole length (blocks concatenated at the end held every
+    # result twice: 90 MiB at the peak of a 10 h report)
+    out = None
+    for a in range(0, max(times.size, 1), STATE_BLOCK):
+        part = solution_errors(sample_at(sol, times[a:a + STATE_BLOCK]),
+                               r.iloc[a:a + STATE_BLOCK], times[a:a + STATE_BLOCK])
+        if out is None:
+            out = [np.empty((times.size, *p.shape[1:]), p.dtype) for p in part]
+        for o, p in zip(out, part, strict=True):
+            o[a:a + len(p)] = p
+    err, sig, x = out
     cols = {}
     for q, name in enumerate(ERROR_QUANTITIES):
         if name in QUANTITIES["velocity"][0] and "velocity" in kinds or \
@@ -201,7 +208,11 @@ def _nees(res_filter, name: str, sol: pd.DataFrame, x: np.ndarray, t_x: np.ndarr
         use = k >= 0
         if not np.any(use):
             return None, "no filter epoch coincides with a reference epoch"
-        ne = nees_blocks(x[use], P[k[use]])
+        rows = np.flatnonzero(use)
+        ne = np.empty((rows.size, len(NEES_NAMES)))
+        for a in range(0, rows.size, COVARIANCE_BLOCK):  # the epochs' covariances a block at
+            r = rows[a:a + COVARIANCE_BLOCK]             # a time, not all copied at once
+            ne[a:a + r.size] = nees_blocks(x[r], P[k[r]])
         df = pd.DataFrame(ne, index=pd.Index(t_x[use], name="time"), columns=NEES_NAMES)
         note = "full epoch covariance"
     else:  # no stored covariances: diagonal of the std columns
@@ -403,6 +414,8 @@ STATE_COLUMNS = ("lat", "lon", "height", "vel_e", "vel_n", "vel_u", "roll", "pit
 
 #: reference epochs per block of :func:`_state_errors`
 STATE_BLOCK = 1 << 16
+#: filter epochs per block of the NEES (their covariances, 1.8 kB each for 15 states)
+COVARIANCE_BLOCK = 1 << 12
 
 
 def _bracketing_rows(ts: np.ndarray, times: np.ndarray) -> np.ndarray:
