@@ -571,7 +571,7 @@ def write_report(result, path: str | os.PathLike, *, dest=None, figures=()) -> l
     output (an :class:`~insgnss.io.outputset.OutputSet` staging path; default beside ``path``).
     Returns the names written besides ``path``."""
     from .plots import report_specs
-    from .report_interactive import render_interactive
+    from .report_interactive import write_interactive
 
     formats = check_figure_formats(figures)
     path = Path(path)
@@ -583,8 +583,13 @@ def write_report(result, path: str | os.PathLike, *, dest=None, figures=()) -> l
     files = [[(ext, dest(name)) for ext, name in row] for row in names]
 
     def interactive():
-        atomic_write_text(dest(INTERACTIVE_NAME),
-                          render_interactive(data, specs, summary_html(result, data), STYLE))
+        summary = summary_html(result, data)
+
+        def write(p):
+            with open(p, "w", encoding="utf-8") as out:
+                write_interactive(out, data, specs, summary, STYLE)
+
+        atomic_write(dest(INTERACTIVE_NAME), write)
 
     pngs = _draw_figures(specs, files, interactive)
     atomic_write_text(path, render_report(result, data, list(zip(specs, pngs, strict=True))))

@@ -14,8 +14,11 @@ from __future__ import annotations
 
 import base64
 import html
+import io
 import json
+import shutil
 from importlib import resources
+from typing import TextIO
 
 import numpy as np
 
@@ -246,12 +249,16 @@ SCRIPT = """
 """
 
 
-def render_interactive(data: ReportData, specs: list[FigureSpec], summary: str,
-                       style: str = "") -> str:
-    """The interactive page as an HTML string: ``summary`` is the HTML of the summary section
-    (:func:`insgnss.report.summary_html`, the same as on the static page), ``style`` its CSS."""
-    figs = {sp.key: figure_json(sp) for sp in specs}
+def write_interactive(out: TextIO, data: ReportData, specs: list[FigureSpec], summary: str,
+                      style: str = "") -> None:
+    """Write the interactive page to the text stream ``out`` piece by piece: ``summary`` is the
+    HTML of the summary section (:func:`insgnss.report.summary_html`, the same as on the static
+    page), ``style`` its CSS. The figures' JSON is encoded in chunks and plotly.js copied from
+    its file: the page of a long run is several MB, which as one string was held three to four
+    times over while it was assembled."""
     title = f"insgnss interactive report: {data.title}"
+    out.write("<!DOCTYPE html><html lang='en'><head><meta charset='utf-8'>"
+              f"<title>{html.escape(title)}</title><style>{style}</style></head><body>")
     body = [f"<h1>{html.escape(title)}</h1>",
             "<nav><a href='report.html'>static report</a> | "
             + " ".join(f"<a href='#{sp.key}'>{html.escape(sp.title)}</a>" for sp in specs)
@@ -266,11 +273,29 @@ def render_interactive(data: ReportData, specs: list[FigureSpec], summary: str,
         body.append(f"<h2 id='{sp.key}'>{html.escape(sp.title)}</h2><figure class='fig' "
                     f"data-key='{sp.key}'><div class='plot' id='plot-{sp.key}'></div>{extra}"
                     f"<figcaption>{html.escape(sp.caption)}</figcaption></figure>")
-    payload = json.dumps(_clean(figs), allow_nan=False, separators=(",", ":")).replace("</", "<\\/")
-    body.append(f"<script type='application/json' id='insgnss-figures'>{payload}</script>")
-    mp = json.dumps(_clean(_map_data(data)), allow_nan=False, separators=(",", ":")).replace("</", "<\\/")
-    body.append(f"<script type='application/json' id='insgnss-map'>{mp}</script>")
-    body.append(f"<script>{plotly_js()}</script><script>{SCRIPT}</script>")
-    return ("<!DOCTYPE html><html lang='en'><head><meta charset='utf-8'>"
-            f"<title>{html.escape(title)}</title><style>{style}</style></head><body>"
-            + "\n".join(body) + "</body></html>\n")
+    out.write("\n".join(body))
+    out.write("\n<script type='application/json' id='insgnss-figures'>")
+    _write_json(out, {sp.key: figure_json(sp) for sp in specs})
+    out.write("</script>\n<script type='application/json' id='insgnss-map'>")
+    _write_json(out, _map_data(data))
+    out.write("</script>\n<script>")
+    with (resources.files("plotly") / "package_data" / "plotly.min.js").open(
+            "r", encoding="utf-8") as js:
+        shutil.copyfileobj(js, out)
+    out.write(f"</script><script>{SCRIPT}</script></body></html>\n")
+
+
+def _write_json(out: TextIO, obj) -> None:
+    """``obj`` as compact JSON with ``</`` escaped (safe inside a script element), in chunks;
+    ``<`` occurs only inside strings, which the encoder yields whole."""
+    enc = json.JSONEncoder(allow_nan=False, separators=(",", ":"))
+    for chunk in enc.iterencode(_clean(obj)):
+        out.write(chunk.replace("</", "<\\/"))
+
+
+def render_interactive(data: ReportData, specs: list[FigureSpec], summary: str,
+                       style: str = "") -> str:
+    """The interactive page as an HTML string (:func:`write_interactive`)."""
+    buf = io.StringIO()
+    write_interactive(buf, data, specs, summary, style)
+    return buf.getvalue()
