@@ -53,7 +53,7 @@ def evaluate_solution(sol: pd.DataFrame, inputs: Inputs, windows, job: Job) -> d
 
 
 #: reference epochs per block of :func:`reference_errors`
-REFERENCE_BLOCK = 1 << 18
+REFERENCE_BLOCK = 1 << 16
 
 
 def reference_errors(sol, inputs: Inputs, block: int = REFERENCE_BLOCK) -> pd.DataFrame:
