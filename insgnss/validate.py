@@ -824,7 +824,7 @@ def time_slice(table, start: float | None = None, stop: float | None = None):
     """Rows of a time-indexed table (strictly increasing index, as every reader returns) with
     ``start <= time <= stop`` (either bound open when None): ``table.loc[start:stop]``
     without pandas' label look-up, which builds a hash table of the whole index on first use
-    (22 bytes per row, 160 MiB for a 10 h log at 200 Hz) and keeps it as long as the index
+    (22 bytes per row; pandas does so below a million rows) and keeps it as long as the index
     lives."""
     t = table.index.to_numpy()
     i = 0 if start is None else int(np.searchsorted(t, start, side="left"))
