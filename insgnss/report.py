@@ -495,7 +495,7 @@ def _draw_by_server(specs, files, while_drawing) -> list[bytes] | None:
     them itself, and so reports any error)."""
     if _SERVER is None:
         return None
-    proc, conn = _SERVER
+    conn = _SERVER[1]
     try:
         conn.send((specs, files))
     except (OSError, ValueError):  # it died

@@ -163,14 +163,13 @@ def _state_errors(sol: pd.DataFrame, ref: pd.DataFrame, kinds: tuple) -> tuple:
     """Velocity / attitude errors and stds at the reference epochs, and the 9-vector error state
     (:func:`insgnss.consistency.solution_errors`)."""
     from .consistency import ERROR_QUANTITIES, solution_errors
+    from .validate import time_slice
 
     need = ["lat", "lon", "height", "vel_e", "vel_n", "vel_u", "roll", "pitch", "heading"]
-    tr = ref.index.to_numpy(float)
     ts = sol.index.to_numpy(float)
     # the reference epochs inside the solution's span: a slice of the (sorted) table, not a
     # copy of it (40 MiB at the output rate of a 10 h log)
-    r = ref.iloc[int(np.searchsorted(tr, ts[0] - 1e-6, side="left")):
-                 int(np.searchsorted(tr, ts[-1] + 1e-6, side="right"))]
+    r = time_slice(ref, ts[0] - 1e-6, ts[-1] + 1e-6)
     # solution_errors takes all columns; absent kinds are dropped below
     absent = {c: np.nan for c in need if c not in r.columns}
     times = r.index.to_numpy(float)

@@ -30,9 +30,10 @@ _DASH = {"solid": "solid", "dashed": "dash", "dotted": "dot", "dashdot": "dashdo
 _SYMBOL = {"o": "circle", ".": "circle", "x": "x-thin-open", "s": "square"}
 
 
-def plotly_js() -> str:
-    """The plotly.js bundle shipped with the ``plotly`` package (embedded once per page)."""
-    return (resources.files("plotly") / "package_data" / "plotly.min.js").read_text("utf-8")
+def plotly_js():
+    """The plotly.js bundle shipped with the ``plotly`` package (embedded once per page), as
+    a resource to open."""
+    return resources.files("plotly") / "package_data" / "plotly.min.js"
 
 
 def _b64(a, dtype: str = "f4") -> dict:
@@ -279,8 +280,7 @@ def write_interactive(out: TextIO, data: ReportData, specs: list[FigureSpec], su
     out.write("</script>\n<script type='application/json' id='insgnss-map'>")
     _write_json(out, _map_data(data))
     out.write("</script>\n<script>")
-    with (resources.files("plotly") / "package_data" / "plotly.min.js").open(
-            "r", encoding="utf-8") as js:
+    with plotly_js().open("r", encoding="utf-8") as js:
         shutil.copyfileobj(js, out)
     out.write(f"</script><script>{SCRIPT}</script></body></html>\n")
 
