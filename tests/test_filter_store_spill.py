@@ -132,3 +132,40 @@ def test_table_take_reads_rows_and_columns_in_blocks(tmp_path, monkeypatch):
     np.testing.assert_array_equal(part.index.to_numpy(), rows * 0.01)
     pd.testing.assert_frame_equal(tab.take(), tab.frame(), check_exact=True)
     assert len(tab) == 1000
+
+
+@pytest.mark.parametrize("high_rate", [False, True])
+def test_smoothed_table_formed_at_the_rows_read_is_the_whole_table(monkeypatch, high_rate):
+    """The smoothed IMU-rate table (:class:`insgnss.filter.store.AssembledTable`) formed only
+    at the rows and columns read - contiguous, scattered, across block ends, the compiled
+    high-rate path's rows included - holds the values of the whole table formed at once."""
+    from insgnss.filter.store import AssembledTable
+    from insgnss.io import spill
+
+    truth = car_truth(120.0, 60.0, stops_after=(0,), stop_duration=10.0)
+    rng = np.random.default_rng(5)
+    imu, _ = corrupt_imu(truth, grade("tactical"), rng)
+    gnss = gnss_from_truth(truth, rng)
+    init, _ = perturbed_initial(truth, rng, 1.0, 0.1, (0.005, 0.005, 0.02))
+    ts = imu.index.to_numpy()[truth["stationary"].to_numpy(bool)][1:]
+    res = run_filter(imu, init, [GnssPosition(gnss), Zupt(ts, std=0.01, high_rate=high_rate)],
+                     FilterConfig(imu_model="tactical", initial_att_std=(0.005, 0.005, 0.02)))
+    if high_rate:
+        assert res.high_rate is not None and res.high_rate["t"].size > 500
+    tab = res.smoothed_table
+    assert isinstance(tab, AssembledTable) and tab._values is None
+    monkeypatch.setattr(spill, "BLOCK_BYTES", 3000)  # blocks of 8 rows or so
+    n = len(tab)
+    rows = np.unique(np.concatenate([np.arange(0, n, 37), np.arange(500, 700), [n - 1]]))
+    cols = [tab.columns[k] for k in (0, 2, 5, 9, len(tab.columns) - 1)]
+    part = tab.take(rows, cols)
+    whole_rows = tab.take()
+    assert tab._values is None  # nothing above formed the whole table
+    whole = tab.values  # the whole table at once (what a DataFrame of it holds)
+    np.testing.assert_array_equal(whole_rows.to_numpy(), whole)
+    np.testing.assert_array_equal(part.to_numpy(), whole[np.ix_(rows, [tab.columns.index(c)
+                                                                      for c in cols])])
+    np.testing.assert_array_equal(part.index.to_numpy(), tab.time[rows])
+    pd.testing.assert_frame_equal(res.smoothed, tab.take(), check_exact=True)
+    assert np.isfinite(whole[:, :9]).all() and not np.array_equal(whole[:, :9],
+                                                                   res.forward_array[:, :9])

@@ -233,3 +233,20 @@ def test_real_drive_inputs_read_identically(drive_dir, slow):
         ref = outcome(read, imu)
     same(fast, ref)
     assert fast[0] == "table" and len(fast[1]) > 50_000
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_file_chunks_are_the_file_cut_at_line_ends(tmp_path, seed):
+    """``_file_chunks`` (one reused buffer, read with ``readinto``): the chunks joined are the
+    asked byte range, each but the last ends a line, lines longer than the block included."""
+    rng = random.Random(seed)
+    lines = [b"x" * rng.choice([0, 1, 5, 40, 300, 2000]) for _ in range(400)]
+    body = b"\n".join(lines) + (b"\n" if seed % 2 else b"")
+    p = tmp_path / "f.bin"
+    p.write_bytes(body)
+    for block in (1, 7, 64, 700, 1 << 20):
+        start, stop = rng.randrange(0, 50), len(body) - rng.randrange(0, 50)
+        got = [bytes(buf[a:b]) for buf, a, b in validate._file_chunks(p, start, stop, block)]
+        assert b"".join(got) == body[start:stop]
+        assert all(c.endswith(b"\n") for c in got[:-1])
+        assert all(c for c in got)

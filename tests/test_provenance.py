@@ -51,3 +51,24 @@ def test_summary_and_report_carry_version_resolved_job_and_checksums(tmp_path):
     assert "gate_probability" in html  # the resolved job
     inter = (tmp_path / "out" / "report_interactive.html").read_text()
     assert files["imu.csv"]["sha256"] in inter
+
+
+def test_checksums_beside_the_run_are_those_of_the_files(tmp_path):
+    """The input checksums computed in a thread during the run (``checksums_beside``) are the
+    files' SHA-256; a thread that could not read a file (None) makes ``provenance`` read again."""
+    from types import SimpleNamespace
+
+    from insgnss.job.summary import checksums_beside, input_checksums, provenance
+
+    paths = []
+    for k, size in enumerate((0, 10, 3_000_001)):
+        p = tmp_path / f"f{k}.bin"
+        p.write_bytes(bytes(range(256)) * (size // 256) + b"x" * (size % 256))
+        paths.append(p)
+    job = SimpleNamespace(input_paths=lambda: paths + [tmp_path / "absent.csv"], settings={},
+                          simulation=None)
+    got = checksums_beside(job)()
+    assert got == input_checksums(job)
+    assert [f["sha256"] for f in got] == [hashlib.sha256(p.read_bytes()).hexdigest()
+                                          for p in paths]
+    assert provenance(job, lambda: None)["input_files"] == got

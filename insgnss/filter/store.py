@@ -364,6 +364,75 @@ class Table:
         return pd.DataFrame(out, index=pd.Index(t, name="time"), columns=cols, copy=False)
 
 
+class AssembledTable(Table):
+    """A :class:`Table` whose rows are formed when they are read: ``assemble(index, out)``
+    writes the rows ``index`` (a slice or sorted row numbers) into ``out`` (rows, columns).
+
+    :meth:`take` forms only the rows asked for, block by block (:data:`insgnss.io.spill.
+    BLOCK_BYTES` of rows at a time, ``release(i, j)`` called after each block so that mapped
+    inputs give their pages back), without ever holding the whole table: the smoothed
+    IMU-rate table of a 1 h / 200 Hz log (720,000 x 43 values, 236 MiB written to a mapped
+    file) is read by the evaluation at the reference epochs and by the writers at the output
+    rate only. :attr:`values` (and :meth:`frame`) form the whole table on first use, in an
+    array of ``allocate``, and keep it."""
+
+    def __init__(self, time: np.ndarray, columns: list[str], assemble, *, allocate=np.empty,
+                 release=None):
+        self.time, self.columns = time, list(columns)
+        self._frame: pd.DataFrame | None = None
+        self._assemble, self._allocate = assemble, allocate
+        self._release = release or (lambda i, j: None)
+        self._values: np.ndarray | None = None
+
+    @property
+    def values(self) -> np.ndarray:
+        if self._values is None:
+            from ..io.spill import release
+
+            out = self._allocate((len(self), len(self.columns)), float)
+            for i, j in self._row_blocks():
+                self._assemble(slice(i, j), out[i:j])
+                self._release(i, j)
+                release(out, i, j)
+            self._values = out
+        return self._values
+
+    def _row_blocks(self):
+        from ..io.spill import blocks
+
+        return blocks(len(self), 8 * max(len(self.columns), 1))
+
+    def blocks(self):
+        if self._values is not None:
+            yield from super().blocks()
+        else:
+            yield from self._row_blocks()
+
+    def take(self, rows: np.ndarray | None = None, columns=None) -> pd.DataFrame:
+        if self._values is not None:
+            return super().take(rows, columns)
+        cols = self.columns if columns is None else [c for c in self.columns if c in columns]
+        idx = [self.columns.index(c) for c in cols]
+        full = idx == list(range(len(self.columns)))
+        rows = None if rows is None else np.asarray(rows, np.int64)
+        out = np.empty((len(self) if rows is None else rows.size, len(idx)))
+        for i, j in self._row_blocks():
+            a, b = (i, j) if rows is None else np.searchsorted(rows, (i, j))
+            if b <= a:
+                continue
+            if rows is None:
+                sel = slice(i, j)
+            else:
+                r = rows[a:b]
+                sel = slice(int(r[0]), int(r[-1]) + 1) if r[-1] - r[0] + 1 == r.size else r
+            block = np.empty((b - a, len(self.columns)))
+            self._assemble(sel, block)
+            out[a:b] = block if full else block[:, idx]
+            self._release(i, j)
+        t = self.time.copy() if rows is None else self.time[rows]
+        return pd.DataFrame(out, index=pd.Index(t, name="time"), columns=cols, copy=False)
+
+
 def solution_table(result, name: str):
     """The ``forward`` or ``smoothed`` table of a filter result as it is held: a
     :class:`Table` (arrays, possibly memory-mapped) where the result keeps one

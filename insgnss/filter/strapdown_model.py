@@ -42,7 +42,7 @@ from . import kernels
 from .measurements import NominalState
 from .models import ERROR_DYNAMICS, StateLayout, process_model
 from .process import ProcessModelBase
-from .store import Table
+from .store import AssembledTable, Table
 
 __all__ = ["StrapdownModel", "STD_COLS", "output_columns", "levelling_covariance",
            "DISCRETIZATIONS"]
@@ -301,27 +301,28 @@ class StrapdownModel(ProcessModelBase):
         t = self.t
         n_hr = store.hr_count
         hr_node = np.searchsorted(store.seg1[:n_nodes], np.arange(n_hr), side="right")
-        if smoothed is None:
-            out = self.table
-            X = xs_hr = np.zeros((1, self.layout.n))  # unused: no correction
-            P0 = P1 = None
-            Xp = Xm = X
-            stds = True
-        else:
-            out = self._allocate((n_rows, len(cols)), float)
-            Xp, Xm, Ps, xs_hr = smoothed
-            P0 = P1 = store.Pf if Ps is None else Ps
-            stds = Ps is not None  # without smoothed covariances the std columns are NaN
-        if smoothed is None:
-            P0, P1 = store.Pf, store.Pp
-        # in row blocks: a block's pages of mapped tables are given back after it (spill.py)
-        for i, j in spill.blocks(n_rows, self.table[:1].nbytes):
-            kernels.assemble_output(t[i:j], self.table[i:j], self.seg[i:j], self.post[i:j],
-                                    store.t[:n_nodes], P0, P1, Xp, Xm, store.par, j - i,
-                                    smoothed is not None, out[i:j], xs_hr, hr_node, stds)
-            spill.release(self.table, i, j)
-            spill.release(out, i, j)
-        return Table(t[:n_rows], out[:n_rows], cols)
+        ep_t, par, table, seg, post = store.t[:n_nodes], store.par, self.table, self.seg, self.post
+        if smoothed is None:  # P(e|e) at the start of a segment, P(e|e-1) at its end
+            none = np.zeros((1, self.layout.n))  # unused: no correction
+            # in row blocks: a block's pages of a mapped table are given back after it
+            for i, j in spill.blocks(n_rows, table[:1].nbytes):
+                kernels.assemble_output(t[i:j], table[i:j], seg[i:j], post[i:j], ep_t,
+                                        store.Pf, store.Pp, none, none, par, j - i, False,
+                                        table[i:j], none, hr_node, True)
+                spill.release(table, i, j)
+            return Table(t[:n_rows], table[:n_rows], cols)
+        Xp, Xm, Ps, xs_hr = smoothed
+        P = store.Pf if Ps is None else Ps
+        stds = Ps is not None  # without smoothed covariances the std columns are NaN
+
+        def assemble(rows, out):
+            kernels.assemble_output(t[rows], table[rows], seg[rows], post[rows], ep_t, P, P,
+                                    Xp, Xm, par, out.shape[0], True, out, xs_hr, hr_node, stds)
+
+        # formed where read (store.AssembledTable): the evaluation reads the reference
+        # epochs' rows, the writers the output rate's; nothing writes a whole-log table
+        return AssembledTable(t[:n_rows], cols, assemble, allocate=self._allocate,
+                              release=lambda i, j: spill.release(table, i, j))
 
     def final_state(self, time: float) -> NavState:
         return NavState(self.pos[0], self.pos[1], self.pos[2], self.vel.copy(), self.C.copy(),

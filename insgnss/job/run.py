@@ -25,7 +25,7 @@ from .processes import run_process
 from .result import JobResult
 from .segments import run_segments
 from .span import cut_inputs, processing_window
-from .summary import provenance
+from .summary import checksums_beside, provenance
 from .windows import outage_windows
 
 
@@ -106,13 +106,14 @@ def run_job(job: Job, *, progress: bool | None = None, seed: int | None = None,
     """Run a validated job in memory (no result files written; beyond ``filter.
     store_memory_mb`` the smoother's node store is memory-mapped in ``spill_dir``, default
     the system's temporary folder, :mod:`insgnss.io.spill`)."""
+    checksums = checksums_beside(job)
     ctx = prepare(job, progress=progress, seed=seed, inputs=inputs, spill_dir=spill_dir)
     if len(ctx.imu_report["segments"]) > 1:  # gap_policy = "split" and long gaps
         res = run_segments(ctx, lambda seg_job, seg_inputs: run_job(
             seg_job, progress=progress, inputs=seg_inputs, spill_dir=spill_dir))
     else:
         res = run_process(ctx)
-    res.summary.update(provenance(job))  # version, resolved job, input checksums
+    res.summary.update(provenance(job, checksums))  # version, resolved job, input checksums
     return res
 
 
