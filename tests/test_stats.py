@@ -73,3 +73,23 @@ def test_no_scipy_on_the_process_path():
             "m.split('.')[1:2] and m.split('.')[1] in heavy))")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     assert out.stdout.strip() == "[]"
+
+
+def test_scalar_series_and_fraction_are_the_vector_ones_bit_for_bit():
+    """Arrays of a few elements are summed in Python floats (:data:`insgnss.stats._SCALAR`):
+    the same operations in the same order as the vectorised loops, so the same bits."""
+    from insgnss import stats
+
+    rng = np.random.default_rng(1)
+    a = np.concatenate([rng.uniform(0.1, 20000.0, 1500), rng.uniform(0.1, 5.0, 300)])
+    x = a * rng.uniform(0.2, 3.0, a.size)
+    low = x < a + 1.0
+    for vec, one, sel in ((stats._converged_sum, stats._converged_sum_scalar, low),
+                          (stats._continued_fraction, stats._continued_fraction_scalar, ~low)):
+        got = np.array([one(float(p), float(q)) for p, q in zip(a[sel], x[sel], strict=True)])
+        assert sel.sum() > 200
+        np.testing.assert_array_equal(vec(a[sel], x[sel]), got)
+    # and through the public functions: one element at a time equals the whole array
+    k = rng.uniform(0.3, 30000.0, 40)
+    np.testing.assert_array_equal(stats.chi2_ppf(0.9999, k),
+                                  [stats.chi2_ppf(0.9999, v) for v in k])
