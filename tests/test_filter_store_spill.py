@@ -169,3 +169,33 @@ def test_smoothed_table_formed_at_the_rows_read_is_the_whole_table(monkeypatch, 
     pd.testing.assert_frame_equal(res.smoothed, tab.take(), check_exact=True)
     assert np.isfinite(whole[:, :9]).all() and not np.array_equal(whole[:, :9],
                                                                    res.forward_array[:, :9])
+
+
+def test_row_segments_give_back_the_rows_nodes_and_flags_exactly():
+    """:class:`insgnss.filter.store.RowSegments`: node runs, high-rate runs (values falling by
+    one per row), adjacent high-rate segments, a node right after a high-rate run with the
+    same key, post flags at run ends; any rows, slices across block ends."""
+    from insgnss.filter.store import RowSegments
+    from insgnss.io import spill
+
+    seg = np.array([0, 1, 1, 1, -1, -2, -3, 2, 2, -4, -5, -8, -9, 6, 6, 6, 7, -10, 7, 8],
+                   np.int32)
+    rng = np.random.default_rng(0)
+    long = np.repeat(np.arange(200), rng.integers(1, 30, 200)).astype(np.int32)
+    hr_at = rng.choice(long.size, 300, replace=False)
+    long[np.sort(hr_at)] = -1 - np.arange(300)
+    for s in (seg, long):
+        post = rng.random(s.size) < 0.2
+        for block in (spill.BLOCK_BYTES, 64):  # one block, and blocks of 4 rows
+            with pytest.MonkeyPatch.context() as m:
+                m.setattr(spill, "BLOCK_BYTES", block)
+                rs = RowSegments(s, post, s.size)
+            got_s, got_p = rs.rows(slice(0, s.size))
+            assert got_s.dtype == s.dtype
+            np.testing.assert_array_equal(got_s, s)
+            np.testing.assert_array_equal(got_p, post)
+            rows = np.sort(rng.choice(s.size, s.size // 3, replace=False))
+            np.testing.assert_array_equal(rs.rows(rows)[0], s[rows])
+            np.testing.assert_array_equal(rs.rows(rows)[1], post[rows])
+            assert rs.starts.size < s.size  # runs, not rows
+        assert RowSegments(s, np.zeros(s.size, bool), s.size).rows(slice(3, 9))[1].sum() == 0

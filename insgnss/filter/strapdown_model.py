@@ -42,7 +42,7 @@ from . import kernels
 from .measurements import NominalState
 from .models import ERROR_DYNAMICS, StateLayout, process_model
 from .process import ProcessModelBase
-from .store import AssembledTable, Table
+from .store import AssembledTable, RowSegments, Table
 
 __all__ = ["StrapdownModel", "STD_COLS", "output_columns", "levelling_covariance",
            "DISCRETIZATIONS"]
@@ -182,7 +182,10 @@ class StrapdownModel(ProcessModelBase):
         # rows written between two releases of a mapped table's pages (:meth:`release_rows`)
         self._release_step = (max(1, spill.BLOCK_BYTES // self.table[:1].nbytes)
                               if spill.is_mapped(self.table) else t.size + 1)
-        self.seg = np.zeros(t.size, np.int64)
+        # the node (or -1 - high-rate sample) of each row: int32 halves what the smoothed
+        # table's assembly keeps after the run (29 MiB at 10 h / 200 Hz); int64 only for
+        # logs beyond 2^31 rows
+        self.seg = np.zeros(t.size, np.int32 if t.size < 2**31 - 1 else np.int64)
         self.post = np.zeros(t.size, np.bool_)
         gaps = np.diff(epochs)
         if dense is not None and gaps.size:
@@ -314,15 +317,32 @@ class StrapdownModel(ProcessModelBase):
         Xp, Xm, Ps, xs_hr = smoothed
         P = store.Pf if Ps is None else Ps
         stds = Ps is not None  # without smoothed covariances the std columns are NaN
+        segments = RowSegments(seg, post, n_rows)  # not the per-row arrays (store.py)
 
         def assemble(rows, out):
-            kernels.assemble_output(t[rows], table[rows], seg[rows], post[rows], ep_t, P, P,
-                                    Xp, Xm, par, out.shape[0], True, out, xs_hr, hr_node, stds)
+            seg_r, post_r = segments.rows(rows)
+            kernels.assemble_output(t[rows], table[rows], seg_r, post_r, ep_t, P, P, Xp, Xm,
+                                    par, out.shape[0], True, out, xs_hr, hr_node, stds)
+
+        def release(i, j):
+            """Give back the pages of mapped inputs that rows ``i .. j-1`` read: their
+            forward rows and the nodes (and high-rate samples) they lie between (the job
+            released the node store after the smoother, processes.py)."""
+            spill.release(table, i, j)
+            s = segments.rows(slice(i, j))[0]
+            hr = -1 - s[s < 0]
+            nodes = np.concatenate([s[s >= 0], hr_node[hr]])
+            if nodes.size:
+                lo, hi = max(int(nodes.min()) - 1, 0), int(nodes.max()) + 1
+                for a in (P, Xp, Xm, par):
+                    spill.release(a, lo, hi)
+            if hr.size:
+                spill.release(xs_hr, int(hr.min()), int(hr.max()) + 1)
 
         # formed where read (store.AssembledTable): the evaluation reads the reference
         # epochs' rows, the writers the output rate's; nothing writes a whole-log table
         return AssembledTable(t[:n_rows], cols, assemble, allocate=self._allocate,
-                              release=lambda i, j: spill.release(table, i, j))
+                              release=release)
 
     def final_state(self, time: float) -> NavState:
         return NavState(self.pos[0], self.pos[1], self.pos[2], self.vel.copy(), self.C.copy(),
