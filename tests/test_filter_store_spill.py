@@ -198,4 +198,12 @@ def test_row_segments_give_back_the_rows_nodes_and_flags_exactly():
             np.testing.assert_array_equal(rs.rows(rows)[0], s[rows])
             np.testing.assert_array_equal(rs.rows(rows)[1], post[rows])
             assert rs.starts.size < s.size  # runs, not rows
+            for i in range(0, s.size - 1, 3):  # the extremes of any block lie on its edges
+                j = min(s.size, i + 1 + int(rng.integers(1, 40)))
+                e = rs.rows(rs.edges(i, j))[0]
+                for part in (lambda v: v[v >= 0], lambda v: v[v < 0]):
+                    whole = part(s[i:j])
+                    assert (whole.size == 0) == (part(e).size == 0)
+                    if whole.size:
+                        assert (part(e).min(), part(e).max()) == (whole.min(), whole.max())
         assert RowSegments(s, np.zeros(s.size, bool), s.size).rows(slice(3, 9))[1].sum() == 0

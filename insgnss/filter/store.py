@@ -347,21 +347,21 @@ class Table:
             return self._frame
         idx = [self.columns.index(c) for c in cols]
         full = idx == list(range(len(self.columns)))
-        n_out = len(self) if rows is None else int(np.asarray(rows).size)
-        out = np.empty((n_out, len(idx)))
-        if rows is None:
-            for i, j in self.blocks():
-                out[i:j] = self.values[i:j] if full else self.values[i:j][:, idx]
-            t = self.time.copy()
-        else:
-            rows = np.asarray(rows, np.int64)
-            for i, j in self.blocks():
-                a, b = np.searchsorted(rows, (i, j))
-                if b > a:  # only the asked columns are gathered (not whole rows)
-                    r = rows[a:b]
-                    out[a:b] = self.values[r] if full else self.values[np.ix_(r, idx)]
-            t = self.time[rows]
+        rows = None if rows is None else np.asarray(rows, np.int64)
+        out = np.empty((len(self) if rows is None else rows.size, len(idx)))
+        for i, j in self.blocks():
+            a, b = (i, j) if rows is None else np.searchsorted(rows, (i, j))
+            if b > a:
+                out[a:b] = self._gather(i, j, None if rows is None else rows[a:b], idx, full)
+        t = self.time.copy() if rows is None else self.time[rows]
         return pd.DataFrame(out, index=pd.Index(t, name="time"), columns=cols, copy=False)
+
+    def _gather(self, i: int, j: int, r, idx: list[int], full: bool) -> np.ndarray:
+        """Rows ``r`` (sorted, within ``i .. j-1``; None: all of them) of block ``(i, j)`` at
+        the columns ``idx`` (``full``: all): only the asked columns are gathered."""
+        if r is None:
+            return self.values[i:j] if full else self.values[i:j][:, idx]
+        return self.values[r] if full else self.values[np.ix_(r, idx)]
 
 
 class RowSegments:
@@ -395,11 +395,20 @@ class RowSegments:
             hrs.append(hr[at])
             posts.append(np.flatnonzero(post[i:j]) + i)
             prev = (k[-1], hr[-1])
+
         def cat(parts, dt):
             return np.concatenate(parts) if parts else np.zeros(0, dt)
 
         self.starts, self.keys = cat(starts, np.int64), cat(keys, np.int64)
         self.hr, self.post_rows = cat(hrs, bool), cat(posts, np.int64)
+
+    def edges(self, i: int, j: int) -> np.ndarray:
+        """The rows of ``i .. j-1`` where a run starts or ends: each run is constant or moves
+        by one per row, so the nodes and high-rate samples of the rows between lie within
+        those of these rows."""
+        a, b = np.searchsorted(self.starts, (i + 1, j))
+        s = self.starts[a:b]
+        return np.unique(np.concatenate([[i, j - 1], s, s - 1]))
 
     def rows(self, rows) -> tuple[np.ndarray, np.ndarray]:
         """``(seg[rows], post[rows])`` for a slice or sorted row numbers."""
@@ -458,29 +467,17 @@ class AssembledTable(Table):
         else:
             yield from self._row_blocks()
 
-    def take(self, rows: np.ndarray | None = None, columns=None) -> pd.DataFrame:
+    def _gather(self, i: int, j: int, r, idx: list[int], full: bool) -> np.ndarray:
         if self._values is not None:
-            return super().take(rows, columns)
-        cols = self.columns if columns is None else [c for c in self.columns if c in columns]
-        idx = [self.columns.index(c) for c in cols]
-        full = idx == list(range(len(self.columns)))
-        rows = None if rows is None else np.asarray(rows, np.int64)
-        out = np.empty((len(self) if rows is None else rows.size, len(idx)))
-        for i, j in self._row_blocks():
-            a, b = (i, j) if rows is None else np.searchsorted(rows, (i, j))
-            if b <= a:
-                continue
-            if rows is None:
-                sel = slice(i, j)
-            else:
-                r = rows[a:b]
-                sel = slice(int(r[0]), int(r[-1]) + 1) if r[-1] - r[0] + 1 == r.size else r
-            block = np.empty((b - a, len(self.columns)))
-            self._assemble(sel, block)
-            out[a:b] = block if full else block[:, idx]
-            self._release(i, j)
-        t = self.time.copy() if rows is None else self.time[rows]
-        return pd.DataFrame(out, index=pd.Index(t, name="time"), columns=cols, copy=False)
+            return super()._gather(i, j, r, idx, full)
+        if r is None:
+            sel = slice(i, j)
+        else:  # consecutive rows (the evaluation's): a slice, no gathered copies of the inputs
+            sel = slice(int(r[0]), int(r[-1]) + 1) if r[-1] - r[0] + 1 == r.size else r
+        block = np.empty((j - i if r is None else r.size, len(self.columns)))
+        self._assemble(sel, block)
+        self._release(i, j)
+        return block if full else block[:, idx]
 
 
 def solution_table(result, name: str):

@@ -329,7 +329,7 @@ class StrapdownModel(ProcessModelBase):
             forward rows and the nodes (and high-rate samples) they lie between (the job
             released the node store after the smoother, processes.py)."""
             spill.release(table, i, j)
-            s = segments.rows(slice(i, j))[0]
+            s = segments.rows(segments.edges(i, j))[0]  # the extremes, not every row
             hr = -1 - s[s < 0]
             nodes = np.concatenate([s[s >= 0], hr_node[hr]])
             if nodes.size:
