@@ -12,7 +12,8 @@ times real time) and the size of what it wrote. Modes:
 - **cold**: one run with an empty temporary ``NUMBA_CACHE_DIR`` (every kernel compiled; the
   package's cache is not touched); the compile time of each kernel is printed (numba's
   compile events, exclusive of the callees compiled meanwhile, with the number of
-  specialisations);
+  specialisations; the kernels the compile-ahead helper compiled beside it are loaded, not
+  listed: ``INSGNSS_COMPILE_AHEAD=0`` in the environment measures a run without it);
 - **no report**: one warm run with ``--no-report``.
 
 Data sets:

@@ -31,12 +31,15 @@ def register(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from ..compile_ahead import compile_ahead
     from ..config import load_job
+    from ..job.processes import process_name
     from ..pipeline import run_job, write_outputs
     from .process import output_names, print_summary
 
     job = load_job(demo_job_path())
-    with output_folder(args, args.output, protect=job.input_paths(), names=output_names()):
+    with output_folder(args, args.output, protect=job.input_paths(), names=output_names()), \
+            compile_ahead(process_name(job)):  # on a cold numba cache only
         res = run_job(job, progress=False if args.no_progress else None, seed=args.seed)
         paths = write_outputs(res, args.output)
     print_summary(res)

@@ -42,14 +42,17 @@ def register(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from ..compile_ahead import compile_ahead
     from ..config import load_job
+    from ..job.processes import process_name
     from ..pipeline import incomplete_reason, run_job, write_outputs
 
     job = load_job(args.job)
     if args.no_report:
         job.settings["outputs"]["report"] = False
     out = args.output or job.output_dir
-    with output_folder(args, out, protect=job.input_paths(), names=output_names()):
+    with output_folder(args, out, protect=job.input_paths(), names=output_names()), \
+            compile_ahead(process_name(job)):  # on a cold numba cache only
         if job["outputs"]["report"]:
             # the report's figure workers import matplotlib on the other cores meanwhile
             from ..report import start_figure_workers
