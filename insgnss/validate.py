@@ -1055,8 +1055,12 @@ class SourceRows(np.ndarray):
 
 
 def source_row_numbers(line_no) -> SourceRows:
-    """``line_no`` as a shared, read-only :class:`SourceRows`."""
-    rows = np.array(line_no, np.int64).view(SourceRows)
+    """``line_no`` as a shared, read-only :class:`SourceRows`: int32 (a file of fewer than
+    2^31 lines, 4 bytes per row: 29 MB less for each 7.2 M-row table of a 10 h log at 200 Hz),
+    int64 beyond."""
+    line_no = np.asarray(line_no)
+    small = line_no.size == 0 or (int(line_no.max()) < 2**31 and int(line_no.min()) >= 0)
+    rows = np.array(line_no, np.int32 if small else np.int64).view(SourceRows)
     rows.flags.writeable = False
     return rows
 
