@@ -12,13 +12,12 @@ the order the run first calls them, writing each into the same cache. The run co
 the front as before; when it reaches a kernel the helper has finished, numba loads it from the
 cache (it reads the cache index at every first call). The helper only loads a kernel it finds
 in the cache (jobs differ in the order of their middle kernels, so it does not stop there) and
-ends with the list or with the run. The results
-are those of any run: the same code, compiled by the same numba, into the same cache; only the
-process that compiles a kernel differs.
+ends with the list or with the run. The results are those of any run: the same code, compiled
+by the same numba, into the same cache; only the process that compiles a kernel differs.
 
 The order and the argument types come from :data:`MANIFEST`, recorded from a cold run of a
 representative job per process (``python -m insgnss.compile_ahead record PROCESS -- CLI ARGS``,
-e.g. ``record strapdown -- demo -o /tmp/demo``): the top-level compile events of numba
+e.g. ``record strapdown -- demo -o out/demo``): the top-level compile events of numba
 (``numba:compile``; a kernel's callees are compiled with it), with each argument type as its
 ``repr`` (``Array(float64, 2, 'C', False, aligned=True)``). A kernel a job does not need costs the
 helper time, not the run; an entry that no longer matches the code (renamed kernel, changed
@@ -36,6 +35,8 @@ import sys
 from contextlib import contextmanager
 from importlib import import_module, resources
 from pathlib import Path
+
+from .executors import usable_cores as _cores
 
 #: the recorded kernels per process (:func:`record`)
 MANIFEST = "compile_ahead.json"
@@ -57,9 +58,14 @@ def _type_namespace() -> dict:
 
     ns = {k: getattr(types, k) for k in dir(types) if not k.startswith("_")}
     # the reprs that are not constructor calls: bool, none, an omitted argument's default
-    ns.update({"bool": types.boolean, "none": types.none, "omitted": lambda default: types.Omitted(default),
-               "__builtins__": {}})
+    ns.update({"bool": types.boolean, "none": types.none,
+               "omitted": lambda default: types.Omitted(default), "__builtins__": {}})
     return ns
+
+
+def _argument_types(args: list[str], ns: dict) -> tuple:
+    """The numba types of recorded argument ``repr`` strings (:func:`_type_namespace`)."""
+    return tuple(eval(a, ns) for a in args)  # noqa: S307 (our own package data)
 
 
 def kernel_signatures(process: str, manifest: dict | None = None) -> list[tuple]:
@@ -72,19 +78,12 @@ def kernel_signatures(process: str, manifest: dict | None = None) -> list[tuple]
     for e in entries:
         try:
             disp = getattr(import_module(e["module"]), e["name"])
-            sig = tuple(eval(a, ns) for a in e["args"])  # noqa: S307 (our own package data)
+            sig = _argument_types(e["args"], ns)
         except Exception:  # noqa: BLE001 (a stale entry: the run compiles it itself)
             continue
         if hasattr(disp, "compile") and hasattr(disp, "stats"):
             out.append((disp, sig))
     return out
-
-
-def _cores() -> int:
-    try:
-        return len(os.sched_getaffinity(0))
-    except AttributeError:  # not Linux
-        return os.cpu_count() or 1
 
 
 def is_cached(disp) -> bool:
@@ -216,7 +215,7 @@ def record(process: str, cli_args: list[str], manifest_path: str | Path | None =
     keep = []
     for e in events:
         try:
-            [eval(a, ns) for a in e["args"]]  # noqa: S307
+            _argument_types(e["args"], ns)
         except Exception:  # noqa: BLE001 (e.g. omitted arguments: left to the run)
             continue
         keep.append(e)

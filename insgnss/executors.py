@@ -71,6 +71,14 @@ class Outcome:
         return self.error is None
 
 
+def usable_cores() -> int:
+    """The cores this process may run on (its CPU affinity on Linux, else ``os.cpu_count``)."""
+    try:
+        return len(os.sched_getaffinity(0))
+    except AttributeError:  # not on Linux
+        return os.cpu_count() or 1
+
+
 def _worker_name() -> str:
     import socket
 

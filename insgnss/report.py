@@ -29,6 +29,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from .executors import usable_cores as _cores
 from .io.native import atomic_write, atomic_write_text
 from .report_data import (
     FIGURE_FORMATS,
@@ -395,13 +396,6 @@ def figure_workers(n_figures: int) -> int:
     if n_figures < 4 or "fork" not in multiprocessing.get_all_start_methods():
         return 0
     return max(0, min(_cores() - 1, 3, n_figures // 2))
-
-
-def _cores() -> int:
-    try:
-        return len(os.sched_getaffinity(0))
-    except AttributeError:  # not on Linux
-        return os.cpu_count() or 1
 
 
 #: the figure server forked ahead of the report by :func:`start_figure_workers`:
