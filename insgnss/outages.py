@@ -62,7 +62,7 @@ def _disjoint(windows) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
 
 
 #: times per block of :func:`window_index` (its temporaries stay small on a long log)
-_BLOCK = 1 << 20
+_BLOCK = 1 << 16
 
 
 def window_index(t, windows) -> np.ndarray:

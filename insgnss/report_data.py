@@ -415,9 +415,9 @@ STATE_COLUMNS = ("lat", "lon", "height", "vel_e", "vel_n", "vel_u", "roll", "pit
 
 
 #: reference epochs per block of :func:`_state_errors`
-STATE_BLOCK = 1 << 16
+STATE_BLOCK = 1 << 13
 #: filter epochs per block of the NEES (their covariances, 1.8 kB each for 15 states)
-COVARIANCE_BLOCK = 1 << 12
+COVARIANCE_BLOCK = 1 << 9
 
 
 def _bracketing_rows(ts: np.ndarray, times: np.ndarray) -> np.ndarray:

@@ -382,7 +382,7 @@ class RowSegments:
         self.dtype = seg.dtype
         starts, keys, hrs, posts = [], [], [], []
         prev = None
-        for i, j in blocks(n_rows, 16):
+        for i, j in blocks(n_rows, 16, 1 << 20):
             s = seg[i:j].astype(np.int64)
             hr = s < 0
             k = np.where(hr, s + np.arange(i, j), s)
