@@ -65,20 +65,27 @@ def _disjoint(windows) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
 _BLOCK = 1 << 16
 
 
+def _disjoint_blocks(t: np.ndarray, d):
+    """Per block of :data:`_BLOCK` times of the flat ``t``: ``(i, k, inside)``, the block's
+    first index, the position of the window starting last at or before each time in the sorted
+    disjoint windows ``d`` (:func:`_disjoint`), and whether the time is inside it."""
+    a, b, _ = d
+    for i in range(0, t.size, _BLOCK):
+        t_us = _us(t[i:i + _BLOCK])
+        k = np.searchsorted(a, t_us, side="right") - 1
+        yield i, k, (k >= 0) & (t_us < b[np.maximum(k, 0)])
+
+
 def window_index(t, windows) -> np.ndarray:
     """Index of the window containing each time, -1 outside all windows (overlapping windows:
     the last one listed wins)."""
     t = np.asarray(t, dtype=float)
     d = _disjoint(windows) if len(windows) else None
     if d is not None:  # O((N + W) log W) for any number of windows, block by block
-        a, b, order = d
         idx = np.full(t.shape, -1, dtype=int)
-        flat, out = t.reshape(-1), idx.reshape(-1)
-        for i in range(0, flat.size, _BLOCK):
-            t_us = _us(flat[i:i + _BLOCK])
-            k = np.searchsorted(a, t_us, side="right") - 1
-            inside = (k >= 0) & (t_us < b[np.maximum(k, 0)])
-            out[i:i + _BLOCK][inside] = order[k[inside]]
+        out = idx.reshape(-1)
+        for i, k, inside in _disjoint_blocks(t.reshape(-1), d):
+            out[i:i + _BLOCK][inside] = d[2][k[inside]]
         return idx
     t_us = _us(t)
     idx = np.full(t_us.shape, -1, dtype=int)
@@ -91,10 +98,18 @@ def window_index(t, windows) -> np.ndarray:
 
 def in_windows(t, windows) -> np.ndarray:
     """Boolean mask: ``t`` inside any half-open window."""
-    if len(windows) and _disjoint(windows) is None:
+    t = np.asarray(t, dtype=float)
+    d = _disjoint(windows) if len(windows) else None
+    if d is not None:  # block by block into the mask (no window index of the whole length)
+        mask = np.empty(t.shape, bool)
+        out = mask.reshape(-1)
+        for i, _, inside in _disjoint_blocks(t.reshape(-1), d):
+            out[i:i + inside.size] = inside
+        return mask
+    if len(windows):
         t_us = _us(t)
         mask = np.zeros(t_us.shape, bool)
         for a, b in windows:
             mask |= (t_us >= int(_us(a))) & (t_us < int(_us(b)))
         return mask
-    return window_index(t, windows) >= 0
+    return np.zeros(t.shape, bool)

@@ -94,6 +94,26 @@ def test_a_reference_on_a_mapped_file_reads_the_same_values(tmp_path):
     np.testing.assert_array_equal(mapped.attrs["source_rows"], mem.attrs["source_rows"])
 
 
+def test_rows_of_a_mapped_reference_taken_in_blocks_equal_iloc(tmp_path, monkeypatch):
+    """select_rows on a DataFrame on a mapped file takes its rows a block at a time (each
+    block's pages given back): the same frame as ``iloc``, for rows spread over many blocks,
+    rows inside one block, and a column subset."""
+    import insgnss.io.spill as spill
+    from insgnss.filter.store import select_rows
+
+    path = tmp_path / "truth.csv"
+    _write_reference(path)
+    mem = read_trajectory_csv(path)
+    mapped = read_trajectory_csv(path, allocate=SpillAllocator(0, tmp_path))
+    monkeypatch.setattr(spill, "BLOCK_BYTES", 8 * mapped.shape[1] * 333)  # 333 rows a block
+    for rows in (np.arange(0, len(mem), 7), np.array([5, 6, 300]), np.array([3999])):
+        got = select_rows(mapped, lambda t, r=rows: r)
+        pd.testing.assert_frame_equal(got, mem.iloc[rows])
+        got = select_rows(mapped, lambda t, r=rows: r, ("lat", "heading"))
+        pd.testing.assert_frame_equal(got, mem.iloc[rows][["lat", "heading"]])
+    pd.testing.assert_frame_equal(select_rows(mapped, lambda t: None), mem)
+
+
 def test_window_index_in_blocks_equals_the_whole_array(monkeypatch):
     t = np.arange(0.0, 100.0, 0.01)
     windows = [(10.0, 20.0), (30.005, 40.0), (55.0, 55.01), (90.0, 200.0)]
