@@ -193,7 +193,7 @@ def _state_errors(sol: pd.DataFrame, ref: pd.DataFrame, kinds: tuple) -> tuple:
                 name in QUANTITIES["attitude"][0] and "attitude" in kinds:
             cols[name] = err[:, q]
             cols[f"{name}_std"] = sig[:, q]
-    return pd.DataFrame(cols, index=r.index), x, times
+    return pd.DataFrame(cols, index=r.index, copy=False), x, times  # views: joined below
 
 
 def _nees(res_filter, name: str, sol: pd.DataFrame, x: np.ndarray, t_x: np.ndarray,

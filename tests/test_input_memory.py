@@ -190,3 +190,26 @@ def test_report_state_errors_in_blocks_equal_one_block(monkeypatch):
     np.testing.assert_array_equal(blocked[1], one[1])
     np.testing.assert_array_equal(blocked[2], one[2])
     assert one[1].shape == (1000, 9) and np.isfinite(one[1]).all()
+
+
+def test_trim_heap_gives_back_pyarrows_pool(monkeypatch):
+    """trim_heap also empties pyarrow's own pool (where the CSV writer's buffers go), once
+    pyarrow is imported, and does not import it when it is not."""
+    import sys
+
+    import pyarrow as pa
+
+    from insgnss.io.spill import trim_heap
+
+    calls = []
+
+    class Pool:
+        def release_unused(self):
+            calls.append(True)
+
+    monkeypatch.setattr(pa, "default_memory_pool", lambda: Pool())
+    trim_heap()
+    assert calls == [True]
+    monkeypatch.delitem(sys.modules, "pyarrow")
+    trim_heap()  # pyarrow not imported: left alone
+    assert calls == [True] and "pyarrow" not in sys.modules
