@@ -405,7 +405,9 @@ _SERVER = None
 
 def _warm() -> None:
     """Import matplotlib and lay out one text (font files and caches load on the first text
-    drawn), so that what follows only draws."""
+    drawn) and one mathtext label (a log axis's tick labels, ``10^-2``: the first one builds
+    matplotlib's mathtext grammar, 0.2 s, once per process and inherited by the forked
+    helpers), so that what follows only draws."""
     from matplotlib.figure import Figure
 
     from .plots import mpl
@@ -413,6 +415,7 @@ def _warm() -> None:
     mpl()
     fig = Figure(figsize=(1, 1))
     fig.text(0.5, 0.5, "0.5 m")
+    fig.text(0.5, 0.2, r"$\mathdefault{10^{-2}}$")
     fig.canvas.draw()
 
 

@@ -6,7 +6,7 @@ from filterpy.kalman import KalmanFilter
 from filterpy.kalman import predict as kf_predict
 from filterpy.kalman import update as kf_update
 
-from insgnss.errors import ConfigError
+from insgnss.errors import ConfigError, FilterHealthError
 from insgnss.filter import kalman
 from insgnss.filter.engine import FilterConfig
 
@@ -96,3 +96,19 @@ def test_smoother_record_equals_the_numpy_solve(n, m):
         np.testing.assert_allclose(S @ G, H, rtol=0, atol=1e-9 * np.abs(H).max())
         np.testing.assert_allclose(K @ S, P @ H.T, rtol=0, atol=1e-9 * np.abs(P @ H.T).max())
         assert K.shape == (n, m) and G.shape == (m, n) and s.shape == (m,)
+
+
+def test_smoother_record_stops_on_an_indefinite_innovation_covariance():
+    """A broken predicted covariance (S = H Pp H^T + R not positive definite) stops the
+    filter with the epoch named, instead of recording a meaningless solve."""
+    rng = np.random.default_rng(3)
+    _, P, _, _, z, R, H = _case(rng, 15, 3)
+    P = P - 1e3 * np.eye(15)  # indefinite: H Pp H^T dominates R with negative eigenvalues
+    with pytest.raises(FilterHealthError, match=r"t = 12\.500000 s \(smoother record\)"):
+        kalman.smoother_record(P, H, R, z, 12.5)
+    # and a valid one from a non-contiguous Pp is the same as from a contiguous one
+    _, P, _, _, z, R, H = _case(rng, 15, 3)
+    a = kalman.smoother_record(P, H, R, z)
+    b = kalman.smoother_record(np.asfortranarray(P), np.asfortranarray(H), R, z)
+    for u, v in zip(a, b, strict=True):
+        np.testing.assert_array_equal(u, v)

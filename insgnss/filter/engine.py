@@ -595,7 +595,7 @@ def _update(run: _Run, e: int, x, P):
     if run.config.smoother:
         # the smoother's record of the update: H, K = Pp H^T S^-1, S^-1 H, S^-1 z (a
         # forward-only run, e.g. of the self-tuning, skips it: a solve per epoch)
-        K, G, s = smoother_record(Pp, H, R, z)
+        K, G, s = smoother_record(Pp, H, R, z, sched.epochs[e])
         run.store.add_update(H, K, G, s)
     return x, P, Pp, True
 

@@ -22,6 +22,9 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
+from ..errors import FilterHealthError
+from .linalg import cholesky_into, tri_solve
+
 __all__ = ["KALMAN_BACKENDS", "backend", "predict", "smoother_record", "update"]
 
 #: values of ``FilterConfig.kalman``
@@ -89,29 +92,48 @@ def update(x, P, z, R, H):
 
 @njit(cache=True)
 def _smoother_record(Pp, H, R, z):
-    S = (H @ Pp) @ np.ascontiguousarray(H.T) + R
     m, n = H.shape
-    B = np.empty((m, n + 1))
-    B[:, :n] = H
-    B[:, n] = z
-    Gs = np.linalg.solve(S, B)
-    G = np.ascontiguousarray(Gs[:, :n])
-    return (Pp @ np.ascontiguousarray(G.T)), G, np.ascontiguousarray(Gs[:, n])
+    S = (H @ Pp) @ np.ascontiguousarray(H.T) + R
+    L = np.empty((m, m))
+    G = np.empty((m, n))
+    s = np.empty((m, 1))
+    if not cholesky_into(S, L, m):  # S = L L^T
+        return False, G, G, s[:, 0]
+    tri_solve(L, H, m, G, False)  # G = L^-T (L^-1 H)
+    tri_solve(L, G, m, G, True)
+    tri_solve(L, z.reshape((m, 1)), m, s, False)  # s = L^-T (L^-1 z)
+    tri_solve(L, s, m, s, True)
+    return True, Pp @ np.ascontiguousarray(G.T), G, s[:, 0]
 
 
-def smoother_record(Pp, H, R, z):
+def smoother_record(Pp, H, R, z, time: float = float("nan")):
     """The smoother's record of one update from the predicted covariance ``Pp``:
     ``K = Pp H^T S^-1``, ``G = S^-1 H`` and ``s = S^-1 z`` with ``S = H Pp H^T + R``, from
-    one solve of ``S [H z]`` (LAPACK ``gesv``, as ``np.linalg.solve``), compiled: the
-    numpy form cost a stack, a solve and three products of Python overhead per epoch.
+    the Cholesky factor ``S = L L^T`` (as the high-rate path's update,
+    :func:`insgnss.filter.highrate._kalman_update`), compiled: the numpy form cost a stack, a
+    solve and three products of Python overhead per epoch. (LAPACK's ``gesv`` through
+    ``np.linalg.solve`` gave the same numbers to rounding, but its compiled copy-in brought
+    numba's shape-error formatting, 3-4 s, into the first run's compile.)
+
+    ``time``: the epoch, for the message of the error below.
 
     Returns
     -------
     K : (n, m) array
     G : (m, n) array
     s : (m,) array
+
+    Raises
+    ------
+    FilterHealthError
+        ``S`` is not positive definite (a broken ``Pp``).
     """
-    return _smoother_record(_f64(Pp), _f64(H), _f64(R), _f64(z))
+    ok, K, G, s = _smoother_record(_f64(Pp), _f64(H), _f64(R), _f64(z))
+    if not ok:
+        raise FilterHealthError(f"innovation covariance is not positive definite at "
+                                f"t = {time:.6f} s (smoother record)",
+                                found="Cholesky factorisation failed")
+    return K, G, s
 
 
 def backend(name: str):

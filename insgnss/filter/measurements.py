@@ -368,6 +368,16 @@ def _cross3(a, b):
 
 
 @njit(cache=True)
+def _put3(H, c0, A, sign):
+    """``H[:, c0:c0 + 3] = sign * A`` (3x3) by elements: a compiled slice assignment of an
+    array brings numba's shape-mismatch error machinery (its string formatting) into the
+    first-run compile, 2-3 s for the process."""
+    for r in range(3):
+        for c in range(3):
+            H[r, c0 + c] = sign * A[r, c]
+
+
+@njit(cache=True)
 def _gnss_position(p, std, lever, C, lat, lon, height, M, N, n):
     """``(z, H, R)`` of :meth:`GnssPosition.evaluate`, compiled: one call per epoch instead of
     a dozen small array operations (their Python overhead was most of the epoch's cost).
@@ -382,7 +392,7 @@ def _gnss_position(p, std, lever, C, lat, lon, height, M, N, n):
     z[2] = (height - p[2]) + la[2]
     H = np.zeros((3, n))
     H[0, 0] = H[1, 1] = H[2, 2] = 1.0
-    H[:, 6:9] = -_skew3(la)
+    _put3(H, 6, _skew3(la), -1.0)
     return z, H, np.diag(std ** 2)
 
 
@@ -404,8 +414,8 @@ def _gnss_velocity(v, std, lever, use_arm, vel, C, omega_ib, lat, height, M, N, 
             OMEGA_E * np.sin(lat) + vel[0] * np.tan(lat) / (N + height),
         ])
         z = z + u - _cross3(w_il, cl)
-        H[:, 6:9] = _skew3(w_il) @ _skew3(cl) - _skew3(u)
-        H[:, 9:12] = C @ _skew3(lever)
+        _put3(H, 6, _skew3(w_il) @ _skew3(cl) - _skew3(u), 1.0)
+        _put3(H, 9, C @ _skew3(lever), 1.0)
     return z, H, np.diag(std ** 2)
 
 
