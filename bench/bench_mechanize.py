@@ -54,7 +54,11 @@ def main() -> None:
         t1 = time.perf_counter()
         mechanize(imu, x0)
         best = min(best, time.perf_counter() - t1)
-    print(f"first call (import + {'compile' if args.cold else 'cache load'}): {first:.2f} s")
+    from insgnss import aot
+
+    what = "cache load" if not args.cold else "compile" if not aot.table() else "no compile"
+    print(f"first call (import + {what}): {first:.2f} s (ahead-of-time kernels: "
+          f"{aot.status()})")
     print(f"mechanize: {args.samples:,} samples in {best:.3f} s (best of {args.repeat}) "
           f"= {args.samples / best:,.0f} samples/s")
     if not args.cold:

@@ -432,6 +432,10 @@ def main() -> None:
 
     print(f"insgnss {CODE}; python {sys.version.split()[0]}; {os.cpu_count()} cores; "
           f"load average {' '.join(f'{x:.2f}' for x in os.getloadavg())}")
+    aot = subprocess.run([sys.executable, "-c", "import insgnss.aot as a; print(a.status())"],
+                         capture_output=True, text=True, env={**os.environ, "PYTHONPATH": str(CODE)})
+    print(f"ahead-of-time kernels (insgnss._aot, a cold run needs none of those compiled): "
+          f"{aot.stdout.strip() or aot.stderr.strip()[-300:]}")
     jobs = []
     if args.only in (None, "drive"):
         data = REPO.parent / "shared" / "data" / "gnss-imu-rtklibexplorer" / "drive_0708"

@@ -33,39 +33,16 @@ import os
 import subprocess
 import sys
 from contextlib import contextmanager
-from importlib import import_module, resources
+from importlib import import_module
 from pathlib import Path
 
 from .executors import usable_cores as _cores
+from .kernel_manifest import MANIFEST, load_manifest
+from .kernel_manifest import argument_types as _argument_types
+from .kernel_manifest import type_namespace as _type_namespace
 
-#: the recorded kernels per process (:func:`record`)
-MANIFEST = "compile_ahead.json"
 #: environment variable that turns the helper off ("0")
 ENV_SWITCH = "INSGNSS_COMPILE_AHEAD"
-
-
-def load_manifest() -> dict:
-    """The packaged manifest (``insgnss/data/compile_ahead.json``); ``{}`` when absent."""
-    try:
-        text = (resources.files("insgnss") / "data" / MANIFEST).read_text()
-    except (FileNotFoundError, OSError):
-        return {}
-    return json.loads(text)
-
-
-def _type_namespace() -> dict:
-    from numba.core import types
-
-    ns = {k: getattr(types, k) for k in dir(types) if not k.startswith("_")}
-    # the reprs that are not constructor calls: bool, none, an omitted argument's default
-    ns.update({"bool": types.boolean, "none": types.none,
-               "omitted": lambda default: types.Omitted(default), "__builtins__": {}})
-    return ns
-
-
-def _argument_types(args: list[str], ns: dict) -> tuple:
-    """The numba types of recorded argument ``repr`` strings (:func:`_type_namespace`)."""
-    return tuple(eval(a, ns) for a in args)  # noqa: S307 (our own package data)
 
 
 def kernel_signatures(process: str, manifest: dict | None = None) -> list[tuple]:
@@ -98,8 +75,13 @@ def is_cached(disp) -> bool:
 
 def wanted(process: str, manifest: dict | None = None) -> bool:
     """Whether a run of ``process`` should start the helper: switched on, two or more usable
-    cores, a manifest for the process, and its last kernel not in the cache (a cold cache)."""
+    cores, no ahead-of-time kernels for the process (:mod:`insgnss.aot`), a manifest for the
+    process, and its last kernel not in the cache (a cold cache)."""
     if os.environ.get(ENV_SWITCH, "1") == "0" or _cores() < 2:
+        return False
+    from . import aot
+
+    if process in aot.PROCESSES and aot.table():  # its kernels are compiled already
         return False
     manifest = load_manifest() if manifest is None else manifest
     entries = manifest.get("kernels", {}).get(process)
@@ -196,9 +178,14 @@ def trace(out: str | Path, cli_args: list[str]) -> int:
     return int(rc or 0)
 
 
-def record(process: str, cli_args: list[str], manifest_path: str | Path | None = None) -> dict:
+def record(process: str, cli_args: list[str], manifest_path: str | Path | None = None,
+           add: bool = False) -> dict:
     """Record the kernels of ``process`` from a cold run of ``insgnss CLI_ARGS`` (a child with
-    an empty temporary ``NUMBA_CACHE_DIR``) into the manifest (default: the packaged one)."""
+    an empty temporary ``NUMBA_CACHE_DIR`` and the ahead-of-time kernels off, so that every
+    kernel compiles) into the manifest (default: the packaged one). ``add``: append the
+    kernels (and argument types) the recorded entries of ``process`` do not have yet, after
+    them, instead of replacing them: the union of several jobs (the ahead-of-time build
+    exports every entry, :mod:`insgnss.aot`)."""
     import tempfile
 
     import numba
@@ -207,7 +194,8 @@ def record(process: str, cli_args: list[str], manifest_path: str | Path | None =
         Path(__file__).resolve().parent / "data" / MANIFEST
     with tempfile.TemporaryDirectory() as tmp:
         out = Path(tmp) / "events.json"
-        env = dict(os.environ, NUMBA_CACHE_DIR=str(Path(tmp) / "cache"), **{ENV_SWITCH: "0"})
+        env = dict(os.environ, NUMBA_CACHE_DIR=str(Path(tmp) / "cache"),
+                   **{ENV_SWITCH: "0", "INSGNSS_AOT": "0"})
         subprocess.run([sys.executable, "-m", "insgnss.compile_ahead", "trace", str(out),
                         *cli_args], env=env, check=True)
         events = json.loads(out.read_text())
@@ -221,21 +209,31 @@ def record(process: str, cli_args: list[str], manifest_path: str | Path | None =
         keep.append(e)
     manifest = json.loads(path.read_text()) if path.exists() else {}
     manifest["numba"] = numba.__version__
-    manifest.setdefault("recorded_with", {})[process] = "insgnss " + " ".join(cli_args)
-    manifest.setdefault("kernels", {})[process] = keep
+    command = "insgnss " + " ".join(cli_args)
+    kernels = manifest.setdefault("kernels", {})
+    if add and kernels.get(process):
+        have = {(e["module"], e["name"], tuple(e["args"])) for e in kernels[process]}
+        keep = kernels[process] + [e for e in keep
+                                   if (e["module"], e["name"], tuple(e["args"])) not in have]
+        was = manifest.setdefault("recorded_with", {}).get(process, "")
+        command = was + (" + " if was else "") + command
+    manifest.setdefault("recorded_with", {})[process] = command
+    kernels[process] = keep
     path.write_text(json.dumps(manifest, indent=1) + "\n")
     return manifest
 
 
 def main(argv: list[str] | None = None) -> int:
     """``python -m insgnss.compile_ahead PROCESS`` (the helper),
-    ``... record PROCESS -- CLI ARGS`` (update the manifest), ``... trace OUT CLI ARGS``."""
+    ``... record PROCESS [--add] -- CLI ARGS`` (update the manifest; ``--add``: append to it),
+    ``... trace OUT CLI ARGS``."""
     argv = list(sys.argv[1:] if argv is None else argv)
     if argv[:1] == ["trace"]:
         return trace(argv[1], argv[2:])
     if argv[:1] == ["record"]:
         cli = argv[argv.index("--") + 1:] if "--" in argv else argv[2:]
-        m = record(argv[1], cli)
+        add = "--add" in argv[2:argv.index("--") if "--" in argv else 2]
+        m = record(argv[1], cli, add=add)
         print(f"recorded {len(m['kernels'][argv[1]])} kernels of {argv[1]!r}")
         return 0
     if len(argv) != 1:

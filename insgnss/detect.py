@@ -116,6 +116,7 @@ import numpy as np
 import pandas as pd
 from numba import njit
 
+from .aot import entry
 from .errors import ConfigError
 from .imu import ACCEL_COLS, DTHETA_COLS, DV_COLS, GYRO_COLS, is_increment_table
 from .validate import time_slice
@@ -191,6 +192,7 @@ def shoe_statistic(acc, gyro, window, sigma_a, sigma_w, g):
 AMV_BLOCK = 256
 
 
+@entry
 @njit(cache=True)
 def amv_statistic(acc, window):
     """Standard deviation of the specific-force vector over the window [m/s^2].
@@ -537,6 +539,7 @@ def valley_level(stat: np.ndarray, dt: float, config: DetectorConfig) -> np.ndar
 
 
 # --- compiled decision logic -----------------------------------------------------------------
+@entry
 @njit(cache=True)
 def hysteresis_decision(stat, threshold, ratio):
     """Still when ``stat < threshold``; once still, stay still until ``stat > ratio*threshold``."""
@@ -573,6 +576,7 @@ def fill_short_runs(flags, value, min_len):
     return out
 
 
+@entry
 @njit(cache=True)
 def shrink_runs(flags, n):
     """Shorten every still run by ``n`` samples at both ends (runs of ``2n`` or fewer vanish);
@@ -595,6 +599,7 @@ def shrink_runs(flags, n):
     return out
 
 
+@entry
 @njit(cache=True)
 def drop_short_runs(flags, min_len):
     """Clear still runs (``True``) shorter than ``min_len`` samples, including runs at the ends."""

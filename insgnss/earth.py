@@ -22,6 +22,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
+from .aot import entry
 from .errors import InvalidValueError
 
 # --- WGS84 ellipsoid (GRS80 differs only in 1/f in the 9th digit of b) -------------------------
@@ -208,6 +209,7 @@ def normal_gravity_sc(s, c, h, model):
     return _somigliana(s * s, h)
 
 
+@entry
 @njit(cache=True)
 def normal_gravity_id(lat, h, model):
     """Normal gravity [m/s^2] for a kernel model id (see :data:`GRAVITY_MODELS`)."""
@@ -234,6 +236,7 @@ def normal_gravity(lat, h, model: str | int = "somigliana"):
     return normal_gravity_id(lat, h, mid)
 
 
+@entry
 @njit(cache=True)
 def radii(lat):
     """Meridian radius M and prime-vertical radius N [m] (Noureldin et al. 2013, ch. 2).
@@ -304,6 +307,7 @@ def geodetic_to_ecef(lat, lon, h) -> tuple:
     return _vector_out(geodetic_to_ecef_nb(*args), shape)
 
 
+@entry
 @njit(cache=True)
 def geodetic_to_ecef_nb(lat, lon, h):
     """:func:`geodetic_to_ecef` in compiled code (scalars there; the Python entry point
@@ -316,6 +320,7 @@ def geodetic_to_ecef_nb(lat, lon, h):
     return x, y, z
 
 
+@entry
 @njit(cache=True)
 def ecef_to_geodetic(x, y, z):
     """ECEF (x, y, z) [m] to geodetic (lat, lon [rad], h [m]).
@@ -339,6 +344,7 @@ def ecef_to_geodetic(x, y, z):
     return lat, lon, h
 
 
+@entry
 @njit(cache=True)
 def _ecef_to_enu_matrix(lat, lon):
     sl, cl = np.sin(lat), np.cos(lat)
@@ -417,6 +423,7 @@ def enu_displacement_to_geodetic(lat, h, de, dn, du) -> tuple:
     return _vector_out(_enu_displacement_to_geodetic(*args), shape)
 
 
+@entry
 @njit(cache=True)
 def _enu_displacement_to_geodetic(lat, h, de, dn, du):
     """:func:`enu_displacement_to_geodetic` on 1-D float64 arrays (one specialisation)."""

@@ -20,6 +20,7 @@ import numpy as np
 import pandas as pd
 from numba import njit
 
+from .aot import entry
 from .attitude import euler_to_dcm
 from .earth import enu_displacement_to_geodetic, geodetic_to_ecef_nb
 from .outages import in_windows, window_index
@@ -41,6 +42,7 @@ def move_point(traj: pd.DataFrame, lever_arm) -> pd.DataFrame:
     return out
 
 
+@entry
 @njit(cache=True)
 def _position_errors_nb(ts, slat, slon, sh, tr, rlat, rlon, rh, jr, max_gap):
     """ENU errors (N, 3) at the reference epochs ``tr`` (geodetic ``rlat rlon rh``) of the

@@ -49,6 +49,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
+from ..aot import entry
 from ..stats import chi2_ppf
 from .linalg import _innovation_cov, cholesky_into
 
@@ -130,6 +131,7 @@ def nis3(S, o, y):
     return out
 
 
+@entry
 @njit(cache=True)
 def nis(S, y):
     """Normalised innovation squared ``y^T S^-1 y`` by Cholesky; NaN if S is not PD."""
@@ -137,6 +139,7 @@ def nis(S, y):
     return nis_into(S, y, np.empty((m, m)), np.empty(m))
 
 
+@entry
 @njit(cache=True)
 def gate_step(streak, tid, time, nis_value, thr, recovery):
     """Gate decision for one measurement of type ``tid`` at ``time``.

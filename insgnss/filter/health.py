@@ -39,6 +39,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
+from ..aot import entry
 from ..errors import FilterHealthError
 from .linalg import cholesky_into
 
@@ -49,6 +50,7 @@ __all__ = ["check_covariance", "is_positive_definite", "RunawayNis", "imu_outlie
 OUTLIER_FACTOR = 5.0
 
 
+@entry
 @njit(cache=True)
 def is_positive_definite(P):
     """True if the symmetric matrix P has a Cholesky factorisation (all pivots > 0)."""
@@ -94,6 +96,7 @@ def _small_median(a, n):
     return (a[half - 1] + a[half]) / 2
 
 
+@entry
 @njit(cache=True)
 def runaway_push(buf_t, buf_v, state, tid, time, nnis, window, min_count, bound, scratch):
     """Record one normalized NIS of type ``tid``; return the window median if it exceeds

@@ -22,6 +22,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
+from ..aot import entry
 from ..errors import FilterHealthError
 from .linalg import cholesky_into, tri_solve
 
@@ -31,6 +32,7 @@ __all__ = ["KALMAN_BACKENDS", "backend", "predict", "smoother_record", "update"]
 KALMAN_BACKENDS = ("compiled", "filterpy")
 
 
+@entry
 @njit(cache=True)
 def _predict(x, P, F, Q):
     x1 = F @ x
@@ -38,6 +40,7 @@ def _predict(x, P, F, Q):
     return x1, P1
 
 
+@entry
 @njit(cache=True)
 def _update(x, P, z, R, H):
     Ht = np.ascontiguousarray(H.T)
@@ -90,6 +93,7 @@ def update(x, P, z, R, H):
     return _update(_f64(x), _f64(P), _f64(z), _f64(R), _f64(H))
 
 
+@entry
 @njit(cache=True)
 def _smoother_record(Pp, H, R, z):
     m, n = H.shape

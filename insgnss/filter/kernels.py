@@ -16,6 +16,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
+from ..aot import entry
 from ..attitude import euler_to_dcm_nb, rotvec_to_dcm_nb
 from ..earth import gravity_somigliana, normal_gravity_sc, radii
 from ..mechanization.core import _matmul3
@@ -29,6 +30,7 @@ DISC_SECOND_ORDER = 0
 DISC_VANLOAN = 1
 
 
+@entry
 @njit(cache=True)
 def store_nav(nav_out, j, pos, vel, C):
     """Write position, velocity and the Euler angles of ``C`` into ``nav_out[j, 0:9]``."""
@@ -161,6 +163,7 @@ def interval_step(
         wander_step(Cne, hv, vel, C, dthc, dvc, dt_s, gravity_model, attitude_update, fix_height, work)
 
 
+@entry
 @njit(cache=True)
 def propagate_nominal(
     t,
@@ -346,6 +349,7 @@ def expm_nb(A):
     return E
 
 
+@entry
 @njit(cache=True)
 def discretize(Fint, Qint, sub_dt, n_sub, decay, qdiag, method, Phi_tot, Qd_tot, Fx=None, Qx=None):
     """Transition matrix and process noise of a segment from its covariance sub-intervals.
@@ -455,6 +459,7 @@ def discretize(Fint, Qint, sub_dt, n_sub, decay, qdiag, method, Phi_tot, Qd_tot,
     return total
 
 
+@entry
 @njit(cache=True)
 def apply_feedback(pos, vel, C, pnom, x):
     """Closed-loop correction of the nominal state by the error estimate ``x`` (nominal minus
@@ -550,6 +555,7 @@ def correct_position_velocity(nav, j, x, out):
         out[j, 3 + i] = nav[j, 3 + i] - x[3 + i]
 
 
+@entry
 @njit(cache=True)
 def assemble_output(
     t,

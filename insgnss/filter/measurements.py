@@ -43,6 +43,7 @@ import numpy as np
 import pandas as pd
 from numba import njit
 
+from ..aot import entry
 from ..attitude import wrap_pi
 from ..earth import OMEGA_E, normal_gravity
 from ..errors import InputFormatError, InvalidValueError
@@ -173,6 +174,7 @@ class CompiledSpec(NamedTuple):
     std: np.ndarray
 
 
+@entry
 @njit(cache=True)
 def evaluate_compiled(kind, ip, fp, val, std, vel, C, lat, w_ib, window, gyro_psd, pnom, z, H, R):
     """``(z, H, R)`` of a compiled measurement model (``kind`` ZUPT, ZARU or BODY_VELOCITY with
@@ -377,6 +379,7 @@ def _put3(H, c0, A, sign):
             H[r, c0 + c] = sign * A[r, c]
 
 
+@entry
 @njit(cache=True)
 def _gnss_position(p, std, lever, C, lat, lon, height, M, N, n):
     """``(z, H, R)`` of :meth:`GnssPosition.evaluate`, compiled: one call per epoch instead of
@@ -396,6 +399,7 @@ def _gnss_position(p, std, lever, C, lat, lon, height, M, N, n):
     return z, H, np.diag(std ** 2)
 
 
+@entry
 @njit(cache=True)
 def _gnss_velocity(v, std, lever, use_arm, vel, C, omega_ib, lat, height, M, N, n):
     """``(z, H, R)`` of :meth:`GnssVelocity.evaluate`, compiled (see :func:`_gnss_position`).

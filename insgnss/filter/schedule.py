@@ -25,6 +25,8 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit
 
+from ..aot import entry
+
 __all__ = ["Schedule", "build_schedule"]
 
 
@@ -142,6 +144,7 @@ def _high_rate_events(t, ep, times: list, tol: float):
     return _hr_events_kernel(t, ep, allt, ptr, tol)
 
 
+@entry
 @njit(cache=True)
 def _hr_events_kernel(t, ep, allt, ptr, tol):
     """Compiled core of :func:`_high_rate_events` (``allt``: the times of every high-rate

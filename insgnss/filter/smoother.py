@@ -56,6 +56,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
+from ..aot import entry
 from ..columns import STD_COLS  # noqa: F401  (the filter tables' std columns, here as before)
 from .linalg import _mm, cholesky_into, congruence_t, matvec_t, tri_solve
 
@@ -250,6 +251,7 @@ def _hr_forward(
             xs_hr[h, i] = x[i]
 
 
+@entry
 @njit(cache=True)
 def _mbf_backward15(
     Pf,
@@ -325,6 +327,7 @@ def _mbf_backward15(
     )
 
 
+@entry
 @njit(cache=True)
 def mbf_backward(
     Pf,

@@ -56,6 +56,8 @@ import numpy as np
 import pandas as pd
 from numba import njit
 
+from ..aot import entry
+
 __all__ = ["NodeStore", "InnovationLog", "Table", "dense_rows", "innovation_tables",
            "select_rows", "solution_table"]
 
@@ -71,6 +73,7 @@ def dense_rows(H_ptr, H_col, H_val, r0: int, r1: int, n: int) -> np.ndarray:
     return out
 
 
+@entry
 @njit(cache=True)
 def _append_rows(H, K, G, s, r, H_ptr, H_col, H_val, K_out, G_out, s_out):
     """Write update rows ``r .. r+m-1``: the non-zeros of ``H`` row by row, columns

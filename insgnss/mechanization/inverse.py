@@ -26,6 +26,7 @@ import pandas as pd
 from numba import njit
 
 from .. import earth
+from ..aot import entry
 from ..attitude import euler_to_dcm
 from ..earth import check_latitude
 from ..errors import ConfigError
@@ -87,6 +88,7 @@ def inverse_mechanize(
     return increments_table(t, dth, dv)
 
 
+@entry
 @njit(cache=True)
 def _llf_mid_terms_batch(lat, h, v, dt, gravity_model, wie, K, g):
     """:func:`~.strapdown.llf_earth_terms` for every interval."""
@@ -108,6 +110,7 @@ def inverse_increments(t, lat, h, v, C, gravity_model="somigliana", attitude_upd
     return inverse_step_increments(dt, v[:-1], v[1:], C[:-1], C[1:], wie, K, g, attitude_update)
 
 
+@entry
 @njit(cache=True)
 def _integrate_position(t, vel, lat0, lon0, h0, out):
     pos_lat, pos_lon, pos_h = lat0, lon0, h0

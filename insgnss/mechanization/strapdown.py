@@ -56,6 +56,7 @@ from numba import njit
 
 from .. import attitude, earth
 from ..align import gyrocompass, level
+from ..aot import entry
 from ..attitude import dcm_to_euler, euler_to_dcm
 from ..earth import E2, OMEGA_E, A, check_latitude, normal_gravity_sc, radii
 from ..errors import ConfigError
@@ -163,6 +164,7 @@ def strapdown_step(pos, vel, C, dth, dv, dt, gravity_model, attitude_update, fix
     pos[0], pos[1], pos[2] = position_step(pos[0], pos[1], pos[2], v0, vel, dt, c_m, Rm, Rn)
 
 
+@entry
 @njit(cache=True)
 def _mechanize_kernel(t, dth, dv, pos0, vel0, C0, gravity_model, attitude_update, fix_height, out):
     """Run the strapdown over all samples; ``out`` (N, 9) receives NAV_COLS per sample."""
