@@ -39,7 +39,7 @@ import hashlib
 import os
 from pathlib import Path
 
-#: the extension module built by setup.py (:func:`extension`)
+#: the extension module built by setup.py (:func:`compiler`)
 MODULE = "insgnss._aot"
 #: environment variable that turns the ahead-of-time kernels off ("0"), at build and at run time
 ENV_SWITCH = "INSGNSS_AOT"
@@ -74,13 +74,13 @@ def entries(manifest: dict | None = None) -> list[dict]:
     """Manifest entries (``{"module", "name", "args"}``) of every process, each ``(module,
     name, args)`` once, in the manifest's order of processes and entries: export ``k{i}`` of
     the module is entry ``i``."""
-    from .kernel_manifest import load_manifest
+    from .kernel_manifest import entry_key, load_manifest
 
     manifest = load_manifest() if manifest is None else manifest
     out, seen = [], set()
     for process in sorted(set(manifest.get("kernels", {})) & set(PROCESSES)):
         for e in manifest["kernels"][process]:
-            key = (e["module"], e["name"], tuple(e["args"]))
+            key = entry_key(e)
             if key not in seen:
                 seen.add(key)
                 out.append({"module": e["module"], "name": e["name"], "args": list(e["args"])})
@@ -138,6 +138,18 @@ def export_signature(sig: tuple) -> tuple[tuple, tuple]:
     return tuple(sig[:n]) + (types.none,) * len(pad), pad
 
 
+def _export_types(e: dict, ns: dict) -> tuple:
+    """``(recorded types, export types, defaults)`` of manifest entry ``e``
+    (:func:`export_signature`); export types None where no export can take the entry."""
+    from .kernel_manifest import argument_types
+
+    sig = argument_types(e["args"], ns)
+    args, pad = export_signature(sig)
+    if args is not None and argument_check(args) is None:
+        args = None
+    return sig, args, pad
+
+
 def argument_check(sig: tuple):
     """A function of ``len(sig)`` positional arguments that is true when their types are
     ``sig`` (:func:`_condition`); None when an argument type is not one an export takes."""
@@ -160,8 +172,9 @@ _STATUS = "not loaded"
 
 
 def _load() -> dict:
-    """``{"module.name": [(n_args, check, export), ...]}`` of the built module, or ``{}``
-    (:func:`status` says why)."""
+    """``{"module.name": [(n_args, check, export, defaults), ...]}`` of the built module, or
+    ``{}`` (:func:`status` says why); ``check`` takes the ``n_args`` arguments a call gives,
+    ``defaults`` are appended to them for the export."""
     global _STATUS
     if os.environ.get(ENV_SWITCH, "1") == "0":
         _STATUS = f"off ({ENV_SWITCH}=0)"
@@ -175,7 +188,7 @@ def _load() -> dict:
         _STATUS = ("stale (the sources changed since insgnss._aot was built: "
                    "reinstall to rebuild it; the kernels are compiled by numba meanwhile)")
         return {}
-    from .kernel_manifest import argument_types, type_namespace
+    from .kernel_manifest import type_namespace
 
     ns, table = type_namespace(), {}
     for i, e in enumerate(entries()):
@@ -185,15 +198,14 @@ def _load() -> dict:
         if fn is None:
             continue
         try:
-            sig, pad = export_signature(argument_types(e["args"], ns))
+            _, args, pad = _export_types(e, ns)
         except Exception:  # noqa: BLE001 (a type this numba does not know: the JIT path)
             continue
-        if sig is not None and relaxed:
-            sig = read_only(sig)
-        check = None if sig is None else argument_check(sig[:len(sig) - len(pad)])
-        if check is not None:
-            table.setdefault(f"{e['module']}.{e['name']}", []).append(
-                (len(sig) - len(pad), check, fn, pad))
+        if args is None:
+            continue
+        given = len(args) - len(pad)  # the arguments a call gives; the defaults follow
+        check = argument_check((read_only(args) if relaxed else args)[:given])
+        table.setdefault(f"{e['module']}.{e['name']}", []).append((given, check, fn, pad))
     _STATUS = f"used ({sum(map(len, table.values()))} exports of {len(table)} kernels)"
     return table
 
@@ -269,16 +281,15 @@ def exports() -> list[tuple[str, object, object]]:
     that no longer resolve or whose types an export cannot take are left out."""
     from importlib import import_module
 
-    from .kernel_manifest import argument_types, type_namespace
+    from .kernel_manifest import type_namespace
 
     ns, out = type_namespace(), []
     for i, e in enumerate(entries()):
         try:
             disp = getattr(import_module(e["module"]), e["name"])
             disp = getattr(disp, "_disp", disp)  # an Entry of an earlier build
-            sig = argument_types(e["args"], ns)
-            args, _ = export_signature(sig)
-            if args is None or argument_check(args) is None:
+            sig, args, _ = _export_types(e, ns)
+            if args is None:
                 continue
             disp.compile(sig)
             ret = disp.overloads[sig].signature.return_type
@@ -312,10 +323,11 @@ def _types(fn, sig: tuple, ret) -> bool:
 
 
 def _check_export(fn, sig: tuple, ret) -> None:
-    """Type and lower ``fn`` for ``sig -> ret`` as ``numba.pycc`` does (its flags, an explicit
-    return type; no machine code): raises where pycc would, so that one kernel it cannot
-    compile (numba's JIT types it, e.g. a variable given two integer constants) leaves only
-    that kernel out instead of failing the whole module."""
+    """Type and lower ``fn`` alone for ``sig -> ret`` with ``numba.pycc``'s flags (an
+    explicit return type; no machine code); raises where that fails, e.g. for the read-only
+    variant of a kernel that writes an array. It does not catch a failure that depends on the
+    other exports of the module (see :data:`PROCESSES`): the whole build fails then, and
+    setup.py installs without the module."""
     from numba.core.compiler import Flags, compile_extra
     from numba.core.registry import cpu_target
 

@@ -37,7 +37,7 @@ from importlib import import_module
 from pathlib import Path
 
 from .executors import usable_cores as _cores
-from .kernel_manifest import MANIFEST, load_manifest
+from .kernel_manifest import MANIFEST, entry_key, load_manifest
 from .kernel_manifest import argument_types as _argument_types
 from .kernel_manifest import type_namespace as _type_namespace
 
@@ -190,12 +190,14 @@ def record(process: str, cli_args: list[str], manifest_path: str | Path | None =
 
     import numba
 
+    from .aot import ENV_SWITCH as AOT_SWITCH
+
     path = Path(manifest_path) if manifest_path else \
         Path(__file__).resolve().parent / "data" / MANIFEST
     with tempfile.TemporaryDirectory() as tmp:
         out = Path(tmp) / "events.json"
         env = dict(os.environ, NUMBA_CACHE_DIR=str(Path(tmp) / "cache"),
-                   **{ENV_SWITCH: "0", "INSGNSS_AOT": "0"})
+                   **{ENV_SWITCH: "0", AOT_SWITCH: "0"})
         subprocess.run([sys.executable, "-m", "insgnss.compile_ahead", "trace", str(out),
                         *cli_args], env=env, check=True)
         events = json.loads(out.read_text())
@@ -212,9 +214,8 @@ def record(process: str, cli_args: list[str], manifest_path: str | Path | None =
     command = "insgnss " + " ".join(cli_args)
     kernels = manifest.setdefault("kernels", {})
     if add and kernels.get(process):
-        have = {(e["module"], e["name"], tuple(e["args"])) for e in kernels[process]}
-        keep = kernels[process] + [e for e in keep
-                                   if (e["module"], e["name"], tuple(e["args"])) not in have]
+        have = {entry_key(e) for e in kernels[process]}
+        keep = kernels[process] + [e for e in keep if entry_key(e) not in have]
         was = manifest.setdefault("recorded_with", {}).get(process, "")
         command = was + (" + " if was else "") + command
     manifest.setdefault("recorded_with", {})[process] = command

@@ -22,6 +22,11 @@ def load_manifest() -> dict:
     return json.loads(text)
 
 
+def entry_key(e: dict) -> tuple:
+    """``(module, name, argument types)`` of a manifest entry: one kernel specialisation."""
+    return e["module"], e["name"], tuple(e["args"])
+
+
 def type_namespace() -> dict:
     """The names that the recorded ``repr`` strings of numba types use (:func:`argument_types`)."""
     from numba.core import types
@@ -38,4 +43,4 @@ def argument_types(args: list[str], ns: dict) -> tuple:
     return tuple(eval(a, ns) for a in args)  # noqa: S307 (our own package data)
 
 
-__all__ = ["MANIFEST", "argument_types", "load_manifest", "type_namespace"]
+__all__ = ["MANIFEST", "argument_types", "entry_key", "load_manifest", "type_namespace"]
