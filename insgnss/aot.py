@@ -48,9 +48,9 @@ ENV_SWITCH = "INSGNSS_AOT"
 ENV_CPU = "INSGNSS_AOT_CPU"
 
 _PACKAGE = Path(__file__).resolve().parent
-#: the processes whose manifest kernels are exported (foot: numba.pycc fails to type
-#: ``highrate.dense_segment`` after ``earth.normal_gravity_id`` in one module; JIT meanwhile)
-PROCESSES = ("strapdown",)
+#: the processes whose manifest kernels are exported (the wander-azimuth frame has no recorded
+#: manifest: their kernels are compiled by numba on first use)
+PROCESSES = ("strapdown", "foot", "riss")
 
 
 def source_digest(root: Path = _PACKAGE) -> int:

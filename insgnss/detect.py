@@ -153,6 +153,7 @@ def _window_bounds(k, n, half_lo, half_hi):
     return lo, hi
 
 
+@entry
 @njit(cache=True)
 def shoe_statistic(acc, gyro, window, sigma_a, sigma_w, g):
     """SHOE/GLRT statistic per sample (centred window of ``window`` samples)."""
@@ -253,6 +254,7 @@ def amv_statistic(acc, window):
     return out
 
 
+@entry
 @njit(cache=True)
 def are_statistic(gyro, window):
     """RMS angular rate over the window [rad/s]."""
@@ -316,6 +318,7 @@ def running_min(x, half):
     return -running_max(-x, half)
 
 
+@entry
 @njit(cache=True)
 def quiet_runs(stat, level, min_len):
     """True on runs of ``stat < level`` lasting at least ``min_len`` samples (standing)."""
@@ -452,6 +455,7 @@ def _quantile_select(x, lo, hi, m, q, hp, guess=np.inf):
     return vlo + (pos - i) * (vhi - vlo), vhi
 
 
+@entry
 @njit(cache=True)
 def running_quantile(x, half, q, step):
     """``q``-quantile of the finite values of ``x`` over ``[k - half, k + half]``.

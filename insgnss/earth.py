@@ -250,6 +250,7 @@ def radii(lat):
     return M, N
 
 
+@entry
 @njit(cache=True)
 def earth_rate_l(lat):
     """Earth rotation rate expressed in ENU, ``w_ie^l = (0, we cos lat, we sin lat)`` (eq. 22)."""

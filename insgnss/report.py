@@ -500,10 +500,11 @@ def _draw_by_server(specs, files, while_drawing) -> list[bytes] | None:
         return None
     try:
         if while_drawing is not None:
-            while_drawing()
-        return conn.recv()
-    except (EOFError, OSError):
-        return None
+            while_drawing()  # its errors are the run's (an OSError here is no dead server)
+        try:
+            return conn.recv()
+        except (EOFError, OSError):
+            return None
     finally:
         stop_figure_workers()
 
@@ -562,11 +563,14 @@ def check_figure_formats(formats) -> list[str]:
     return list(dict.fromkeys(out))
 
 
-def write_report(result, path: str | os.PathLike, *, dest=None, figures=()) -> list[str]:
+def write_report(result, path: str | os.PathLike, *, dest=None, figures=(),
+                 while_drawing=None) -> list[str]:
     """Write ``report.html`` at ``path``, the interactive page and, for each format in
     ``figures``, every figure as ``fig_<key>.<ext>``; ``dest(name)`` gives the path of another
     output (an :class:`~insgnss.io.outputset.OutputSet` staging path; default beside ``path``).
-    Returns the names written besides ``path``."""
+    ``while_drawing()`` runs in this process while other processes draw the figures (before
+    the interactive page; :func:`_draw_figures`): ``insgnss process`` writes its trajectories
+    then. Returns the names written besides ``path``."""
     from .plots import report_specs
     from .report_interactive import write_interactive
 
@@ -588,6 +592,11 @@ def write_report(result, path: str | os.PathLike, *, dest=None, figures=()) -> l
 
         atomic_write(dest(INTERACTIVE_NAME), write)
 
-    pngs = _draw_figures(specs, files, interactive)
+    def meanwhile():
+        if while_drawing is not None:
+            while_drawing()
+        interactive()
+
+    pngs = _draw_figures(specs, files, meanwhile)
     atomic_write_text(path, render_report(result, data, list(zip(specs, pngs, strict=True))))
     return [name for row in names for _, name in row] + [INTERACTIVE_NAME]

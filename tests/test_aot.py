@@ -107,9 +107,13 @@ def test_entries_are_the_manifests_kernels_once():
         {"module": "m", "name": "f", "args": ["float64"]},
         {"module": "m", "name": "f", "args": ["float64"]},
         {"module": "m", "name": "f", "args": ["int64"]}],
-        "foot": [{"module": "m", "name": "g", "args": []}]}}
+        "foot": [{"module": "m", "name": "f", "args": ["int64"]},
+                 {"module": "m", "name": "g", "args": []}],
+        "wander": [{"module": "m", "name": "h", "args": []}]}}  # no process of the module
     got = aot.entries(manifest)
-    assert [(e["name"], e["args"]) for e in got] == [("f", ["float64"]), ("f", ["int64"])]
+    # processes in name order, each entry once
+    assert [(e["name"], e["args"]) for e in got] == [
+        ("f", ["int64"]), ("g", []), ("f", ["float64"])]
 
 
 built = aot.status().startswith("used")
@@ -137,25 +141,35 @@ def test_every_kernel_of_the_manifest_is_exported_and_an_entry():
         assert isinstance(getattr(import_module(e["module"]), e["name"]), aot.Entry), key
 
 
-def _demo(out: Path, env: dict) -> None:
-    subprocess.run([sys.executable, "-m", "insgnss.cli", "demo", "-o", str(out),
+def _run(args: list[str], out: Path, env: dict) -> None:
+    subprocess.run([sys.executable, "-m", "insgnss.cli", *args, "-o", str(out),
                     "--no-progress"], check=True, env=env, cwd=ROOT,
                    stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
 
 
+#: one command per process of the module (aot.PROCESSES): the bundled demo (simulation,
+#: alignment, strapdown filter, smoother, evaluation, report), the foot-mounted walk
+#: (simulation, stance detection, high-rate ZUPT/ZARU filter, smoother) and the RISS land
+#: vehicle (simulation with an odometer, RISS filter, smoother)
+FIRST_RUNS = {"strapdown": ["demo"], "foot": ["process", "scenarios/foot_walk.toml"],
+              "riss": ["process", "scenarios/land_vehicle_riss.toml"]}
+
+
 @pytest.mark.slow
 @needs_module
-def test_first_run_compiles_nothing_and_equals_the_jit_path(tmp_path):
-    """The bundled demo (simulation, alignment, strapdown filter, smoother, evaluation, report)
-    on an empty numba cache: no kernel is compiled (every call finds its export), and its
-    trajectories and innovations are byte for byte those of the JIT path."""
+@pytest.mark.parametrize("process", sorted(FIRST_RUNS))
+def test_first_run_compiles_nothing_and_equals_the_jit_path(tmp_path, process):
+    """A run of each process on an empty numba cache: no kernel is compiled (every call finds
+    its export), and its trajectories and innovations are byte for byte those of the JIT
+    path."""
+    assert set(FIRST_RUNS) == set(aot.PROCESSES)
     env = dict(os.environ, PYTHONPATH=str(ROOT), INSGNSS_COMPILE_AHEAD="0",
                NUMBA_CACHE_DIR=str(tmp_path / "cache"))
-    _demo(tmp_path / "aot", env)
+    _run(FIRST_RUNS[process], tmp_path / "aot", env)
     compiled = sorted(p.name for p in (tmp_path / "cache").rglob("*.nbi"))
     assert compiled == []
     jit = dict(env, INSGNSS_AOT="0")
     del jit["NUMBA_CACHE_DIR"]  # the package's cache (the build filled it)
-    _demo(tmp_path / "jit", jit)
+    _run(FIRST_RUNS[process], tmp_path / "jit", jit)
     for name in ("forward.csv", "smoothed.csv", "innovations.csv", "rejected.csv"):
         assert (tmp_path / "aot" / name).read_bytes() == (tmp_path / "jit" / name).read_bytes()

@@ -450,6 +450,29 @@ def test_figure_server_lost_or_unused(tmp_path):
     assert not proc.is_alive() and proc.exitcode in (0, -15) and rep._SERVER is None
 
 
+
+def test_error_while_the_server_draws_is_raised():
+    """An error of the work done while the server draws (``insgnss process`` writes its
+    trajectories then; an OSError of a full disk) is the run's error: raised, not taken for a
+    dead server and swallowed; the server is stopped."""
+    import multiprocessing
+
+    import insgnss.report as rep
+
+    if "fork" not in multiprocessing.get_all_start_methods() or rep._cores() < 2:
+        pytest.skip("the figure server needs fork and two cores")
+    specs = _small_specs()[:2]
+    rep.start_figure_workers()
+    proc = rep._SERVER[0]
+
+    def write():
+        raise OSError(28, "No space left on device")
+
+    with pytest.raises(OSError, match="No space left"):
+        rep._draw_figures(specs, [[] for _ in specs], write)
+    proc.join(5.0)
+    assert rep._SERVER is None and not proc.is_alive()
+
 def test_figure_specs_need_no_matplotlib():
     """Building the report's specifications and its interactive page imports no matplotlib
     (the figure server draws); the outage colours are matplotlib's tab10 / tab20."""

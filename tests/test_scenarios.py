@@ -76,3 +76,16 @@ def test_bundled_scenario_runs(path: Path):
     if job.simulation:
         t = res.filter.forward.index.to_numpy(float)
         assert t[-1] - t[0] > 0.5 * DURATION
+
+
+def test_the_riss_scenario_is_the_odometer_vehicle():
+    """scenarios/land_vehicle_riss.toml is the simulated drive of land_vehicle_odometer.toml
+    processed by RISS: the same trajectory, sensors and seed (one scenario, two process
+    models), only the name, the description and ``[filter]`` differ."""
+    full, riss = (tomllib.loads((SCENARIOS / n).read_text())
+                  for n in ("land_vehicle_odometer.toml", "land_vehicle_riss.toml"))
+    assert riss["filter"] == {"process_model": "riss"}
+    assert full["filter"].get("process_model", "strapdown") == "strapdown"
+    for d in (full, riss):
+        del d["filter"], d["scenario"]["name"], d["scenario"]["description"]
+    assert riss == full

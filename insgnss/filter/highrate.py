@@ -52,6 +52,7 @@ import time as _time
 import numpy as np
 from numba import njit
 
+from ..aot import entry
 from ..errors import ConfigError, FilterHealthError
 from ..mechanization.strapdown import STEP_WORK_SHAPE
 from . import gating, health
@@ -469,6 +470,7 @@ def _store_std_row(table, j, P, C, es, n):
         table[j, 18 + npar + i] = np.sqrt(max(P[9 + i, 9 + i], 0.0))
 
 
+@entry
 @njit(cache=True)
 def dense_segment(
     model,
@@ -629,7 +631,9 @@ def dense_segment(
     h = hr0
     n_log = 0
     r = row
-    code = OK
+    # int64 at every assignment: as integer literals, numba's ahead-of-time compiler could not
+    # unify the codes (insgnss.aot)
+    code = np.int64(OK)
     fail_t, fail_v, fail_tid = 0.0, 0.0, -1
     while j < n_t and t[j] <= t_end:
         dt_full = t[j] - t[j - 1]
@@ -710,11 +714,11 @@ def dense_segment(
                 if not P[i, i] > 0.0:
                     pos_var = False
             if not np.isfinite(fin):
-                code = NONFINITE
+                code = np.int64(NONFINITE)
                 fail_t = t[j]
                 break
             if not pos_var:
-                code = NOT_PD
+                code = np.int64(NOT_PD)
                 fail_t = t[j]
                 break
         # --- 2. evaluate, then gate each measurement against the predicted P
@@ -792,7 +796,7 @@ def dense_segment(
                     rw_t, rw_v, rw_state, tid, t[j], nis / d, rw_window, rw_min, rw_bound, rw_scratch
                 )
                 if med >= 0.0:
-                    code = RUNAWAY
+                    code = np.int64(RUNAWAY)
                     fail_t, fail_v, fail_tid = t[j], med, tid
                     break
             thr = thrs[mi]
@@ -862,11 +866,11 @@ def dense_segment(
             else:
                 ok = _kalman_update(P, Hk, zk, m_acc, HP, S, x, Kt, G, sv, L, W, V, store_G, n)
             if not ok:
-                code = NOT_PD
+                code = np.int64(NOT_PD)
                 fail_t = t[j]
                 break
             if check and (h - hr0) % 64 == 0 and not cholesky_into(P, Lc, n):
-                code = NOT_PD
+                code = np.int64(NOT_PD)
                 fail_t = t[j]
                 break
             if not seq:
@@ -909,7 +913,7 @@ def dense_segment(
         h += 1
         j += 1
         if recovered:
-            code = RECOVERED
+            code = np.int64(RECOVERED)
             break
     status[0] = code
     status[1] = h - hr0

@@ -59,6 +59,7 @@ _euler_dcm = euler_to_dcm_nb  # one compiled implementation (insgnss.attitude)
 
 
 # inline="always": called at every IMU sample of the high-rate path (highrate._model_step)
+@entry
 @njit(cache=True, inline="always")
 def interval_step(
     pos,

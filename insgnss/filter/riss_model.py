@@ -87,6 +87,7 @@ import pandas as pd
 from numba import njit
 
 from .. import earth
+from ..aot import entry
 from ..earth import OMEGA_E, radii
 from ..errors import ConfigError
 from ..imu import grade
@@ -368,6 +369,7 @@ def riss_process(config: FilterConfig, riss: RissConfig, imu_dt: float) -> RissP
 
 
 # --- compiled error dynamics -------------------------------------------------------------------------
+@entry
 @njit(cache=True)
 def riss_jacobians(st, aux, az_mode, Jp, Jr, Jv, Gp, Gr, Gv, Ja, Ga):
     """Linearised pitch, roll, velocity and azimuth-rate errors at the current nominal, in the
@@ -459,6 +461,7 @@ def riss_jacobians(st, aux, az_mode, Jp, Jr, Jv, Gp, Gr, Gv, Ja, Ga):
     Gv[2, W_OD] += u2
 
 
+@entry
 @njit(cache=True)
 def riss_propagate(st, par, j0, j1, t, dthz, fx, fy, aod, vw, vbar, vod, gravity_model, az_mode,
                    coriolis, ybase, ytwin, qc, decay, qdiag, Phi, Qd, out_st, out_aux):
@@ -903,6 +906,7 @@ def _assemble(t, out_st, out_aux, seg, is_ep, ep_t, P_start, P_end, X_start, X_e
     return pd.DataFrame(data, index=pd.Index(t, name="time"), columns=cols, copy=False)
 
 
+@entry
 @njit(cache=True)
 def _assemble_kernel(t, out_st, out_aux, seg, is_ep, ep_t, P_start, P_end, X_start, X_end,
                      par_ep, yi, yb, par_x, par_nom, white, out):

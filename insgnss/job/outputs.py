@@ -50,69 +50,15 @@ def write_outputs(result: JobResult, out_dir: str | Path | None = None) -> dict[
     complete = bool(result.summary.get("complete", result.filter.complete))
     with OutputSet(out, protect=job.input_paths(), stale=OUTPUT_NAMES + (MARKER,)) as outs:
         dest = outs.path
-        point = job["outputs"]["point"]
-        formats = job["outputs"]["formats"]
-        # [outputs] rate_hz: the samples around the aiding epochs stay (the forward solution
-        # jumps there; insgnss.columns)
-        epochs = [x.index for x in (result.inputs.gnss, result.inputs.control_points)
-                  if x is not None]
-        df = table = None
-        rate, preset = job["outputs"]["rate_hz"], job["process"]["preset"]
-
-        def rows_of(t):
-            return decimation_rows(t, rate, epochs, preset)
-
-        # the kept rows only, read in blocks from the engine's arrays (possibly memory-mapped:
-        # no whole-log DataFrame is built; docs/filter.md, Memory)
-        tables = {name: select_rows(solution_table(result.filter, name), rows_of)
-                  for name in ("forward", "smoothed")}
-        # the time base of the data, for the UTC time stamps of the KML / GeoJSON tracks
-        base = result.inputs.imu.attrs.get("time_base")
-        clock = {"time_base": job["job"]["time_base"] if base in (None, "unspecified")
-                 else base, "week": result.inputs.imu.attrs.get("gps_week")}
-        for name, df in tables.items():
-            if df is None:
-                continue
-            if point == "antenna":
-                df = move_point(df, result.inputs.lever_arm)
-            table = select_output_columns(df, job["outputs"]["columns"])  # csv, parquet
-            if "csv" in formats:
-                write_table(table, dest(f"{name}.csv"))
-            if "parquet" in formats:
-                write_parquet(table, dest(f"{name}.parquet"))
-            if "nav" in formats:
-                from ..io.kfgins import write_kfgins_nav
-
-                write_kfgins_nav(df, dest(f"{name}.nav"))
-            if "kml" in formats:
-                from ..io.tracks import write_kml
-
-                write_kml({name: df}, dest(f"{name}.kml"), **clock)
-            if "geojson" in formats:
-                from ..io.tracks import write_geojson
-
-                write_geojson({name: df}, dest(f"{name}.geojson"), **clock)
-            if "eval" in formats:
-                from ..io.tracks import write_eval_csv
-
-                write_eval_csv(move_point(tables[name], result.inputs.lever_arm),
-                               dest(f"{name}_eval.csv"))
-        for name in ("innovations", "rejected"):
-            log = getattr(result.filter, name)
-            write_table(log.set_index("time") if "time" in log.columns else log,
-                        dest(f"{name}.csv"))
-        for name, ev in result.evaluation.items():
-            if len(ev["outages"]):
-                table = ev["outages"]
-                atomic_write(dest(f"outages_{name}.csv"),
-                             lambda p, table=table: table.to_csv(p, index=False))
-        tables = df = table = None
-        trim_heap()  # the written tables' rows go back to the system before the report
         if job["outputs"]["report"]:  # report.html, report_interactive.html, fig_* files
             from ..report import write_report
 
+            # the figures are drawn by other processes while this one writes the tables
             write_report(result, dest("report.html"), dest=dest,
-                         figures=job["outputs"].get("figures", ()))
+                         figures=job["outputs"].get("figures", ()),
+                         while_drawing=lambda: write_tables(result, dest))
+        else:
+            write_tables(result, dest)
         summary = dict(result.summary)
         summary["files"] = sorted(outs.names + ["summary.json"]
                                   + ([] if complete else [MARKER]))
@@ -121,4 +67,70 @@ def write_outputs(result: JobResult, out_dir: str | Path | None = None) -> dict[
         return outs.commit(complete=complete, reason=reason)
 
 
-__all__ = ["OUTPUT_NAMES", "write_outputs"]
+def write_tables(result: JobResult, dest) -> None:
+    """The forward and smoothed trajectories in the job's formats, the innovation and
+    rejection logs and the outage tables; ``dest(name)`` is the path of an output."""
+    job = result.job
+    # [outputs] rate_hz: the samples around the aiding epochs stay (the forward solution
+    # jumps there; insgnss.columns)
+    epochs = [x.index for x in (result.inputs.gnss, result.inputs.control_points)
+              if x is not None]
+    rate, preset = job["outputs"]["rate_hz"], job["process"]["preset"]
+
+    def rows_of(t):
+        return decimation_rows(t, rate, epochs, preset)
+
+    for name in ("forward", "smoothed"):
+        # the kept rows only, read in blocks from the engine's arrays (possibly memory-mapped:
+        # no whole-log DataFrame is built; docs/filter.md, Memory), one solution at a time
+        sol = select_rows(solution_table(result.filter, name), rows_of)
+        if sol is not None:
+            write_solution(result, name, sol, dest)
+        sol = None
+        trim_heap()  # the written table's rows go back to the system
+    for name in ("innovations", "rejected"):
+        log = getattr(result.filter, name)
+        write_table(log.set_index("time") if "time" in log.columns else log,
+                    dest(f"{name}.csv"))
+    for name, ev in result.evaluation.items():
+        if len(ev["outages"]):
+            table = ev["outages"]
+            atomic_write(dest(f"outages_{name}.csv"),
+                         lambda p, table=table: table.to_csv(p, index=False))
+
+
+def write_solution(result: JobResult, name: str, sol, dest) -> None:
+    """One solution's rows ``sol`` (at the IMU) in each of the job's trajectory formats, at
+    the job's output point."""
+    job = result.job
+    formats = job["outputs"]["formats"]
+    df = move_point(sol, result.inputs.lever_arm) if job["outputs"]["point"] == "antenna" \
+        else sol
+    table = select_output_columns(df, job["outputs"]["columns"])  # csv, parquet
+    if "csv" in formats:
+        write_table(table, dest(f"{name}.csv"))
+    if "parquet" in formats:
+        write_parquet(table, dest(f"{name}.parquet"))
+    table = None
+    # the time base of the data, for the UTC time stamps of the KML / GeoJSON tracks
+    base = result.inputs.imu.attrs.get("time_base")
+    clock = {"time_base": job["job"]["time_base"] if base in (None, "unspecified") else base,
+             "week": result.inputs.imu.attrs.get("gps_week")}
+    if "nav" in formats:
+        from ..io.kfgins import write_kfgins_nav
+
+        write_kfgins_nav(df, dest(f"{name}.nav"))
+    if "kml" in formats:
+        from ..io.tracks import write_kml
+
+        write_kml({name: df}, dest(f"{name}.kml"), **clock)
+    if "geojson" in formats:
+        from ..io.tracks import write_geojson
+
+        write_geojson({name: df}, dest(f"{name}.geojson"), **clock)
+    if "eval" in formats:
+        from ..io.tracks import write_eval_csv
+
+        write_eval_csv(move_point(sol, result.inputs.lever_arm), dest(f"{name}_eval.csv"))
+
+__all__ = ["OUTPUT_NAMES", "write_outputs", "write_solution", "write_tables"]

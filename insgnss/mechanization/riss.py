@@ -65,6 +65,7 @@ import pandas as pd
 from numba import njit
 
 from .. import earth
+from ..aot import entry
 from ..attitude import dcm_to_euler
 from ..earth import OMEGA_E, normal_gravity_id, radii
 from ..errors import DataGapError, InputFormatError, InvalidValueError
@@ -245,6 +246,7 @@ def riss_inputs(imu: pd.DataFrame, odometer: pd.DataFrame | np.ndarray, *,
 
 
 # --- the compiled step ------------------------------------------------------------------------------
+@entry
 @njit(cache=True)
 def riss_dcm_col(A, p, r, out):
     """Rows of ``C_b^l`` needed by the kernel: ``out[0] = C[:, 0]`` (body x in ENU),
@@ -352,6 +354,7 @@ def riss_step(st, k, t, dthz, fx, fy, aod, vw, vbar, vod, par, gravity_model, az
     aux[8] = pdot
 
 
+@entry
 @njit(cache=True)
 def riss_velocity(st, v):
     """Set the velocity of ``st`` from speed ``v`` (odometer, corrected), heading and pitch."""
