@@ -3,7 +3,7 @@ module ``insgnss._aot``, the run's numba kernels compiled ahead of time (insgnss
 
 The module is compiled when the package is built (``pip install .`` or ``pip install -e .``):
 numba compiles each kernel of the compile-ahead manifest for the build machine's CPU, then a C
-compiler links them with numba's runtime (about a minute). A build without a C compiler or
+compiler links them with numba's runtime (one to two minutes). A build without a C compiler or
 Python headers, or with ``INSGNSS_AOT=0``, installs the package without it: numba then compiles
 the kernels on their first use, as before.
 """

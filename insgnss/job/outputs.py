@@ -133,4 +133,5 @@ def write_solution(result: JobResult, name: str, sol, dest) -> None:
 
         write_eval_csv(move_point(sol, result.inputs.lever_arm), dest(f"{name}_eval.csv"))
 
+
 __all__ = ["OUTPUT_NAMES", "write_outputs", "write_solution", "write_tables"]
