@@ -26,7 +26,9 @@ Search: coordinate-wise in ``log theta`` (time offsets linearly), each a parabol
 through the current value and one step either side (an unbounded side is expanded by doubling
 steps), the vertex clamped to two steps and the bounds, and evaluated only when the parabola
 predicts a gain of at least :data:`MIN_VERTEX_GAIN` there (a converged coordinate costs no
-extra filter run); ``sweeps`` passes over the parameters, the step halving after each. A
+extra filter run); ``sweeps`` passes over the parameters, the step halving after each. Runs
+that do not depend on each other (the two sides of a bracket or of the polish, the
+observability tests) are asked for together (``run_many``: in parallel in a job). A
 coordinate whose line search gained less than :data:`MIN_VERTEX_GAIN` sits out the next sweeps
 while the other coordinates change the likelihood by less than :data:`OBSERVABLE_DLL` since
 (its optimum cannot have moved by more than its uncertainty). Every filter run is memoised by
@@ -205,7 +207,8 @@ def view_weights(counts: dict) -> dict:
 def tune(run: Callable[[dict], pd.DataFrame | None], parameters: Sequence[Parameter], *,
          sweeps: int = 2, types: Sequence[str] | None = None,
          progress: Callable[[str], None] | None = None,
-         reference: dict | None = None) -> TuneResult:
+         reference: dict | None = None,
+         run_many: Callable[[list[dict]], list] | None = None) -> TuneResult:
     """Maximum-likelihood estimate of ``parameters`` (module docstring).
 
     Parameters
@@ -225,6 +228,11 @@ def tune(run: Callable[[dict], pd.DataFrame | None], parameters: Sequence[Parame
     reference : dict, optional
         The values the likelihood-ratio test of observability compares with and that an
         unobservable parameter keeps (default: the priors, which are also the start).
+    run_many : callable, optional
+        ``run_many([theta, ...]) -> [innovations, ...]``: ``run`` of several parameter sets
+        that do not depend on each other (the two sides of a line search or of the polish,
+        the observability tests), e.g. in parallel (:func:`insgnss.executors.fork_map`). The
+        search evaluates the same points either way, so the result is the same.
     """
     params = list(parameters)
     theta0 = {p.name: p.prior for p in params}
@@ -234,11 +242,22 @@ def tune(run: Callable[[dict], pd.DataFrame | None], parameters: Sequence[Parame
     def key(theta):
         return tuple(round(p.to_u(theta[p.name]), 9) for p in params)
 
-    def objective(theta) -> float:
-        k = key(theta)
-        if k in cache:
-            return cache[k]
-        inn = run(dict(theta))
+    def objectives(thetas: list[dict]) -> list[float]:
+        """The log-likelihood of each parameter set; the new ones run together (``run_many``)."""
+        todo = {}
+        for th in thetas:
+            k = key(th)
+            if k not in cache and k not in todo:
+                todo[k] = dict(th)
+        if todo:
+            new = list(todo.values())
+            runs = run_many(new) if run_many is not None and len(new) > 1 else \
+                [run(th) for th in new]
+            for k, th, inn in zip(todo, new, runs, strict=True):
+                cache[k] = value(th, inn)
+        return [cache[key(th)] for th in thetas]
+
+    def value(theta, inn) -> float:
         state["evaluations"] += 1
         if inn is None:
             val = -math.inf
@@ -248,11 +267,13 @@ def tune(run: Callable[[dict], pd.DataFrame | None], parameters: Sequence[Parame
                 state["weights"] = view_weights({t: n for t, (n, _) in terms.items()
                                                  if types is None or t in types})
             val = log_likelihood(terms, state["weights"], types)
-        cache[k] = val
         if progress is not None:
             progress(", ".join(f"{p.name}={theta[p.name]:.4g}" for p in params)
                      + f": log-likelihood {val:.2f}")
         return val
+
+    def objective(theta) -> float:
+        return objectives([theta])[0]
 
     L0 = objective(theta0)
     if not math.isfinite(L0):
@@ -267,7 +288,7 @@ def tune(run: Callable[[dict], pd.DataFrame | None], parameters: Sequence[Parame
         for p in params:
             if p.name in last and _converged(*last[p.name], best):
                 continue
-            u_new, f_new = _line_search(p, theta, best, objective, scale)
+            u_new, f_new = _line_search(p, theta, best, objectives, scale)
             gain = max(f_new - best, 0.0)
             if f_new > best + 1e-9:
                 theta[p.name], best = p.to_value(u_new), f_new
@@ -279,31 +300,42 @@ def tune(run: Callable[[dict], pd.DataFrame | None], parameters: Sequence[Parame
             break
     # polish and observability: one (initial) step either way from the estimate; a side that
     # is better moves the estimate there (the coordinate search had not converged)
-    table, values = {}, {}
+    table, values, tests = {}, {}, []
     for p in params:
         lo, hi = p.bounds_u
         for _ in range(POLISH_STEPS):
             u = p.to_u(theta[p.name])
             d, better = {}, None
-            for side, uu in (("down", max(u - p.h, lo)), ("up", min(u + p.h, hi))):
-                if abs(uu - u) < 1e-12:
+            sides = [(side, uu) for side, uu in (("down", max(u - p.h, lo)),
+                                                 ("up", min(u + p.h, hi)))]
+            inside = [(side, uu) for side, uu in sides if abs(uu - u) >= 1e-12]
+            fs = dict(zip([side for side, _ in inside],
+                          objectives([{**theta, p.name: p.to_value(uu)} for _, uu in inside]),
+                          strict=True))
+            for side, uu in sides:
+                if side not in fs:
                     d[side] = None  # at the bound
                     continue
-                f = objective({**theta, p.name: p.to_value(uu)})
+                f = fs[side]
                 d[side] = best - f
                 if f > best and (better is None or f > better[1]):
                     better = (uu, f)
             if better is None:
                 break
             theta[p.name], best = p.to_value(better[0]), better[1]
-        at_bound = d["down"] is None or d["up"] is None
-        # the likelihood-ratio test of the prior against the estimate (the others at theirs)
+        # the likelihood-ratio test of the prior against the estimate, the others at theirs
+        # now: its run does not change the search, so the tests of all parameters run
+        # together after the polish (same points, same values)
         prior = p.prior if reference is None else reference[p.name]
-        dll_prior = best - objective({**theta, p.name: prior})
+        tests.append((p, prior, {**theta, p.name: prior}, best, theta[p.name], d))
+    for (p, prior, _, best_p, estimate, d), f_prior in zip(
+            tests, objectives([t[2] for t in tests]), strict=True):
+        dll_prior = best_p - f_prior
         observable = bool(dll_prior >= OBSERVABLE_DLL)
-        values[p.name] = theta[p.name] if observable else prior
-        table[p.name] = {"value": values[p.name], "prior": prior, "estimate": theta[p.name],
-                         "unit": p.unit, "observable": observable, "at_bound": at_bound,
+        values[p.name] = estimate if observable else prior
+        table[p.name] = {"value": values[p.name], "prior": prior, "estimate": estimate,
+                         "unit": p.unit, "observable": observable,
+                         "at_bound": d["down"] is None or d["up"] is None,
                          "dll_prior": dll_prior, "dll_down": d["down"], "dll_up": d["up"],
                          "doc": p.doc}
     final = objective(values)
@@ -321,19 +353,24 @@ def _converged(gain: float, after: float, best: float) -> bool:
     return gain < MIN_VERTEX_GAIN and best - after < OBSERVABLE_DLL
 
 
-def _line_search(p: Parameter, theta: dict, f0: float, objective, scale: float
+def _line_search(p: Parameter, theta: dict, f0: float, objectives, scale: float
                  ) -> tuple[float, float]:
-    """Parabolic line search of one coordinate (module docstring): ``(best u, its value)``."""
+    """Parabolic line search of one coordinate (module docstring): ``(best u, its value)``.
+    ``objectives([theta, ...])``: the log-likelihoods of parameter sets (the two sides of a
+    bracket are evaluated together)."""
     lo, hi = p.bounds_u
     u0 = p.to_u(theta[p.name])
     h = p.h * scale
 
-    def f(u):
-        u = min(max(u, lo), hi)
-        return objective({**theta, p.name: p.to_value(u)}), u
+    def fs(*us):
+        us = [min(max(u, lo), hi) for u in us]
+        vals = objectives([{**theta, p.name: p.to_value(u)} for u in us])
+        return list(zip(vals, us, strict=True))
 
-    fm, um = f(u0 - h)
-    fp, up = f(u0 + h)
+    def f(u):
+        return fs(u)[0]
+
+    (fm, um), (fp, up) = fs(u0 - h, u0 + h)
     best_u, best_f = u0, f0
     for uu, ff in ((um, fm), (up, fp)):
         if ff > best_f:
@@ -352,8 +389,7 @@ def _line_search(p: Parameter, theta: dict, f0: float, objective, scale: float
             break
     # parabola through (best - h, best, best + h) where all three are known
     a_u, b_u = best_u - h, best_u + h
-    fa, ua = f(a_u)
-    fb, ub = f(b_u)
+    (fa, ua), (fb, ub) = fs(a_u, b_u)
     if ua < best_u < ub and math.isfinite(fa) and math.isfinite(fb):
         den = fa - 2.0 * best_f + fb
         # concave: the vertex, unless the parabola predicts less than MIN_VERTEX_GAIN there

@@ -37,7 +37,8 @@ from dataclasses import dataclass
 from typing import Any
 
 __all__ = ["DaskCluster", "Executor", "InProcess", "LocalPool", "Outcome", "TaskError",
-           "call_guarded", "make_executor"]
+           "call_guarded", "call_pooled", "fork_map", "fork_workers", "make_executor",
+           "usable_cores"]
 
 
 @dataclass
@@ -100,6 +101,19 @@ def call_guarded(fn: Callable, index: int, label: Any, args: tuple) -> Outcome:
                        time.perf_counter() - t0, _worker_name(), time.process_time() - c0)
     return Outcome(index, label, value, None, time.perf_counter() - t0, _worker_name(),
                    time.process_time() - c0)
+
+
+#: whether :func:`fork_map` may fork helpers in this process (not in a pool's or a cluster's
+#: worker: the pool already runs a task per core)
+_HELPERS = True
+
+
+def call_pooled(fn: Callable, index: int, label: Any, args: tuple) -> Outcome:
+    """:func:`call_guarded` in a worker of a pool or cluster (:class:`LocalPool`,
+    :class:`DaskCluster`): the task forks no helpers of its own (:func:`fork_workers`)."""
+    global _HELPERS
+    _HELPERS = False
+    return call_guarded(fn, index, label, args)
 
 
 def _lost(index: int, label: Any, exc: BaseException) -> Outcome:
@@ -193,7 +207,7 @@ class LocalPool(Executor):
         from concurrent.futures import as_completed
 
         pool = self._get_pool()
-        futs = {pool.submit(call_guarded, fn, i, lab, args): (i, lab)
+        futs = {pool.submit(call_pooled, fn, i, lab, args): (i, lab)
                 for i, (args, lab) in enumerate(zip(tasks, labels, strict=True))}
         try:
             for f in as_completed(futs):
@@ -259,7 +273,7 @@ class DaskCluster(Executor):
     def _iter(self, fn, tasks, labels):
         from dask.distributed import as_completed
 
-        futs = self.client.map(call_guarded, [fn] * len(tasks), range(len(tasks)), labels,
+        futs = self.client.map(call_pooled, [fn] * len(tasks), range(len(tasks)), labels,
                                tasks, pure=False, retries=0)
         where = {f.key: i for i, f in enumerate(futs)}
         try:
@@ -280,6 +294,106 @@ class DaskCluster(Executor):
         if self._cluster is not None:
             self._cluster.close()
             self._cluster = None
+
+
+# --- forked helpers for work that cannot be pickled ----------------------------------------------
+
+def fork_workers(n_items: int, limit: int = 3) -> int:
+    """Helpers :func:`fork_map` forks for ``n_items`` items: one per further usable core (at
+    most ``limit`` and ``n_items - 1``); none without ``fork``, in a task of a pool or cluster
+    of this module (:func:`call_pooled`: it already runs a task per core) or in a daemonic
+    process (a ``multiprocessing.Pool`` worker, which may not have children)."""
+    import multiprocessing
+
+    if n_items < 2 or not _HELPERS or "fork" not in multiprocessing.get_all_start_methods() \
+            or multiprocessing.current_process().daemon:
+        return 0
+    return max(0, min(usable_cores() - 1, limit, n_items - 1))
+
+
+def _take(fn, items, order, nxt) -> dict:
+    """``{index: fn(item)}`` of the items of ``order`` taken from the shared counter ``nxt``
+    until none is left; an item whose call raised is left out (the caller computes it)."""
+    out = {}
+    while True:
+        with nxt.get_lock():
+            k = nxt.value
+            nxt.value += 1
+        if k >= len(order):
+            return out
+        i = order[k]
+        try:
+            out[i] = fn(items[i])
+        except Exception:  # noqa: BLE001,S112 - raised again by the caller, in its process
+            continue
+
+
+def _fork_helper(conn, fn, items, order, nxt) -> None:
+    try:
+        conn.send(_take(fn, items, order, nxt))
+    except KeyboardInterrupt:  # Ctrl-C reaches the whole group: the caller reports it
+        pass
+    finally:
+        conn.close()
+
+
+def fork_map(fn: Callable[[Any], Any], items: Sequence, workers: int | None = None, *,
+             order: Sequence[int] | None = None,
+             meanwhile: Callable[[], None] | None = None) -> list:
+    """``[fn(x) for x in items]``, computed by this process and ``workers`` helper processes
+    forked for the call (default :func:`fork_workers`).
+
+    For work whose function or data cannot be pickled (a closure over a job's inputs, a
+    figure's description): the helpers inherit ``fn`` and ``items`` when they are forked, and
+    only their results come back (pickled, all of a helper's at its end). Every process takes
+    the next item of ``order`` (default: the items' order; put the costliest first) from one
+    shared counter, so that none waits while another still has several items. ``meanwhile()``
+    runs here once the helpers have started, before this process takes items.
+
+    The values are those of the serial loop: an item whose call raised, or that a helper took
+    and did not return (it died), is computed again here, in the items' order, so that the
+    first failing item raises its exception in this process with its own traceback. Without
+    helpers it is the serial loop over ``order`` (after ``meanwhile()``).
+    """
+    import multiprocessing
+
+    items = list(items)
+    order = list(range(len(items))) if order is None else list(order)
+    workers = fork_workers(len(items)) if workers is None else int(workers)
+    results: dict = {}
+    if workers > 0 and "fork" in multiprocessing.get_all_start_methods():
+        ctx = multiprocessing.get_context("fork")
+        nxt = ctx.Value("q", 0)
+        helpers, done = [], False
+        try:
+            for _ in range(workers):
+                here, there = ctx.Pipe(duplex=False)
+                proc = ctx.Process(target=_fork_helper, args=(there, fn, items, order, nxt),
+                                   daemon=True)
+                proc.start()
+                there.close()
+                helpers.append((proc, here))
+            if meanwhile is not None:
+                meanwhile()
+            results = _take(fn, items, order, nxt)
+            for _, conn in helpers:
+                try:
+                    results.update(conn.recv())
+                except (EOFError, OSError):  # it died: what it held is computed below
+                    pass
+            done = True
+        finally:
+            for proc, conn in helpers:
+                conn.close()
+                if not done:  # an error or Ctrl-C here: the helpers' work is not wanted
+                    proc.terminate()
+                proc.join()
+    else:
+        if meanwhile is not None:
+            meanwhile()
+        for i in order:
+            results[i] = fn(items[i])
+    return [results[i] if i in results else fn(items[i]) for i in range(len(items))]
 
 
 def make_executor(workers: int | None = None, scheduler: str | None = None,

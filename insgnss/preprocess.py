@@ -99,6 +99,10 @@ DRIFT_MIN_WINDOWS = 4
 DRIFT_T_MIN = 5.0
 
 
+#: values of the course-rate misfit evaluated at once (shifts x epochs): bounded memory
+_MISFIT_BLOCK = 1 << 20
+
+
 class _CourseRateMatch:
     """The GNSS course rate and the gyro yaw rate of a log, prepared once for the time-offset
     fits (:func:`estimate_time_offset`, :func:`estimate_time_correction`; module docstring)."""
@@ -149,6 +153,17 @@ class _CourseRateMatch:
         b = np.searchsorted(self.t, tt + half)
         return (self.cs[b] - self.cs[a]) / np.maximum(b - a, 1)
 
+    def rms_misfit(self, tc, half, cr, shifts) -> np.ndarray:
+        """RMS of the course rate ``cr`` at ``tc`` minus the yaw rate at ``tc - shift`` for
+        each shift (every shift at once, in blocks of about :data:`_MISFIT_BLOCK` values)."""
+        out = np.empty(len(shifts))
+        step = max(1, _MISFIT_BLOCK // max(tc.size, 1))
+        for i in range(0, len(shifts), step):
+            s = np.asarray(shifts[i:i + step], float)[:, None]
+            r = cr - self.mean_rate(tc - s, half)
+            out[i:i + step] = np.sqrt(np.mean(r ** 2, axis=1))
+        return out
+
     def fit(self, sel, shifts: np.ndarray, base=None) -> tuple[float, dict]:
         """The best of the constant ``shifts`` over the epochs ``sel`` (added to ``base``, a
         time-varying shift per epoch, when given), refined by a parabola through the three
@@ -164,8 +179,7 @@ class _CourseRateMatch:
         use = inliers(0.0)
         for _ in range(2):  # inliers at zero shift, then at the first estimate
             # IMU stamp t_imu holds the motion at t_imu + dt: GNSS at tc against IMU at tc - dt
-            rms = np.array([np.sqrt(np.mean((cr[use] - self.mean_rate(
-                tc[use] - b0[use] - s, half[use])) ** 2)) for s in shifts])
+            rms = self.rms_misfit(tc[use] - b0[use], half[use], cr[use], shifts)
             k = int(np.argmin(rms))
             use = inliers(float(shifts[k]))
         dt = float(shifts[k])

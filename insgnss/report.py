@@ -29,6 +29,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from .executors import fork_map, fork_workers
 from .executors import usable_cores as _cores
 from .io.native import atomic_write, atomic_write_text
 from .report_data import (
@@ -337,8 +338,7 @@ def _png_bytes(fig) -> bytes:
     return buf.getvalue()
 
 
-#: what the figure workers draw: (specs, files, order, next), set before they are forked
-#: (``order``: figure indices, largest first; ``next``: a shared counter into ``order``)
+#: what the figure workers draw: (specs, files), set before they are forked
 _WORK: tuple | None = None
 
 
@@ -373,29 +373,12 @@ def figure_cost(spec) -> int:
     return 4 * len(spec.panels) + len(traces) // 4 + 16 * colour
 
 
-def _take_figures() -> dict[int, bytes]:
-    """Draw figures of :data:`_WORK` taken from the shared queue until it is empty; their PNG
-    bytes by index."""
-    _, _, order, nxt = _WORK
-    out = {}
-    while True:
-        with nxt.get_lock():
-            k = nxt.value
-            nxt.value += 1
-        if k >= len(order):
-            return out
-        out[order[k]] = _figure(order[k])
-
-
 def figure_workers(n_figures: int) -> int:
     """Processes drawing figures besides the caller: one per further core available (at most
     3), none without ``fork`` (the workers inherit the figure descriptions, nothing is
-    pickled but the PNG bytes coming back) or with fewer than 4 figures."""
-    import multiprocessing
-
-    if n_figures < 4 or "fork" not in multiprocessing.get_all_start_methods():
-        return 0
-    return max(0, min(_cores() - 1, 3, n_figures // 2))
+    pickled but the PNG bytes coming back) or with fewer than 4 figures
+    (:func:`insgnss.executors.fork_workers`)."""
+    return fork_workers(n_figures, limit=min(3, n_figures // 2)) if n_figures >= 4 else 0
 
 
 #: the figure server forked ahead of the report by :func:`start_figure_workers`:
@@ -514,12 +497,11 @@ def _draw_figures(specs, files, while_drawing=None) -> list[bytes]:
     drawn by this process and :func:`figure_workers` forked workers (matplotlib spends most of
     its time in Python, one figure at a time per process); ``while_drawing()`` runs here
     meanwhile. Every process takes the next figure from one shared queue, largest first
-    (:func:`figure_cost`), so that none waits idle while another still has several figures
-    to draw (a fixed split left the process with the sensor-error figure a second behind on
-    the real drive). The paths are resolved here, before forking, so that an output set
-    records every name in this process."""
+    (:func:`figure_cost`; :func:`insgnss.executors.fork_map`), so that none waits idle while
+    another still has several figures to draw (a fixed split left the process with the
+    sensor-error figure a second behind on the real drive). The paths are resolved here,
+    before forking, so that an output set records every name in this process."""
     global _WORK
-    import multiprocessing
 
     if while_drawing is not None:
         while_drawing = _once(while_drawing)  # not again should the server fail
@@ -527,25 +509,10 @@ def _draw_figures(specs, files, while_drawing=None) -> list[bytes]:
     if pngs is not None:
         return pngs
     order = sorted(range(len(specs)), key=lambda i: -figure_cost(specs[i]))  # stable
-    workers = figure_workers(len(specs))
-    ctx = multiprocessing.get_context("fork") if workers else multiprocessing
-    _WORK = (specs, files, order, ctx.Value("i", 0))
+    _WORK = (specs, files)
     try:
-        if not workers:
-            if while_drawing is not None:
-                while_drawing()
-            got = _take_figures()
-            return [got[i] for i in range(len(specs))]
-        from concurrent.futures import ProcessPoolExecutor
-
-        with ProcessPoolExecutor(workers, mp_context=ctx) as ex:
-            remote = [ex.submit(_take_figures) for _ in range(workers)]
-            if while_drawing is not None:
-                while_drawing()
-            got = _take_figures()
-            for f in remote:
-                got.update(f.result())
-        return [got[i] for i in range(len(specs))]
+        return fork_map(lambda i: _figure(i), range(len(specs)), figure_workers(len(specs)),
+                        order=order, meanwhile=while_drawing)
     finally:
         _WORK = None
 

@@ -89,7 +89,10 @@ def test_converged_line_search_skips_the_vertex_run(monkeypatch):
     def sharp(th):  # maximum at 0.3, gain at the vertex 2.0 from the bracket around 0.5
         return -50.0 * (th["u"] - 0.3) ** 2
 
-    u, f = at._line_search(p, {"u": 0.0}, sharp({"u": 0.0}), sharp, 1.0)
+    def each(f):  # the objectives of several parameter sets (_line_search's interface)
+        return lambda thetas: [f(th) for th in thetas]
+
+    u, f = at._line_search(p, {"u": 0.0}, sharp({"u": 0.0}), each(sharp), 1.0)
     assert u == pytest.approx(0.3, abs=1e-12) and f == pytest.approx(0.0, abs=1e-12)
 
     def calls_on_flat():
@@ -98,7 +101,7 @@ def test_converged_line_search_skips_the_vertex_run(monkeypatch):
         def flat(th):  # predicted vertex gain 1e-6, far below MIN_VERTEX_GAIN
             calls.append(th["u"])
             return -1e-4 * th["u"] ** 2
-        u, _ = at._line_search(p, {"u": 0.1}, flat({"u": 0.1}), flat, 1.0)
+        u, _ = at._line_search(p, {"u": 0.1}, flat({"u": 0.1}), each(flat), 1.0)
         return u, len(calls)
 
     u, n = calls_on_flat()
@@ -147,6 +150,34 @@ def test_converged_coordinate_sits_out_the_next_sweep(monkeypatch):
     assert res.values == full.values and res.parameters["scale"]["observable"]
     assert converged(0.01, -10.0, -9.0) and not converged(0.01, -10.0, -10.0 + 2.0)
     assert not converged(0.1, -10.0, -10.0)
+
+
+def test_runs_together_give_the_serial_result():
+    """The two sides of a bracket and of the polish go to run_many at once (forked helpers in a
+    job); the search, its evaluations and its result are those of one run after the other."""
+    from insgnss.executors import fork_map
+
+    scale, nhc = _scale_problem(3.0), _scale_problem(0.5, seed=2)
+
+    def run(theta):
+        b = nhc({"scale": theta["nhc"]})
+        b["type"] = "nhc"
+        return pd.concat([scale(theta), b], ignore_index=True)
+
+    params = [Parameter("scale", 1.0, 0.1, 30.0), Parameter("nhc", 1.0, 0.01, 10.0)]
+    serial = tune(run, params, sweeps=3)
+    batches = []
+
+    def run_many(thetas):
+        batches.append(len(thetas))
+        return fork_map(run, thetas, 1)
+
+    together = tune(run, params, sweeps=3, run_many=run_many)
+    assert together.values == serial.values and together.parameters == serial.parameters
+    assert together.log_likelihood == serial.log_likelihood
+    assert together.evaluations == serial.evaluations
+    assert batches and set(batches) == {2}  # pairs, each counted once
+    assert sum(batches) < serial.evaluations
 
 
 def test_failed_runs_are_rejected():
@@ -232,6 +263,37 @@ def test_autotune_recovers_known_noise_and_coverage():
     assert cov_tuned >= cov_fixed and cov_tuned >= 0.97
     assert abs(nees_tuned - 2.0) < abs(nees_fixed - 2.0) and nees_tuned < 3.0
     assert tuned.summary["autotune"]["tuning_windows"]  # the coast view took part
+
+
+def test_forked_runs_tune_as_one_process(monkeypatch):
+    """A job's self-tuning runs the filter for two parameter sets at once in a forked helper:
+    the estimates and the trajectory are those of one process (the runs are deterministic)."""
+    import multiprocessing
+
+    from insgnss import executors
+
+    if "fork" not in multiprocessing.get_all_start_methods():
+        pytest.skip("forked helpers need fork")
+    from insgnss.job import tuning
+
+    helpers = []
+
+    def counted(fn, items):
+        helpers.append(executors.fork_workers(len(items)))
+        return executors.fork_map(fn, items)
+
+    monkeypatch.setattr(tuning, "fork_map", counted)
+    monkeypatch.setattr(executors, "usable_cores", lambda: 2)
+    forked = _run(True)
+    # a pair: one run here, one in a helper (a pair one of whose runs an earlier stage did:
+    # the other alone, here)
+    assert set(helpers) == {0, 1} and helpers.count(1) > helpers.count(0)
+    monkeypatch.setattr(executors, "usable_cores", lambda: 1)
+    alone = _run(True)
+    a, b = forked.summary["autotune"], alone.summary["autotune"]
+    assert a["evaluations"] == b["evaluations"]
+    assert a["parameters"] == b["parameters"] and a["log_likelihood"] == b["log_likelihood"]
+    pd.testing.assert_frame_equal(forked.filter.forward, alone.filter.forward, check_exact=True)
 
 
 def test_nhc_sigma_is_tuned_only_when_named():

@@ -606,6 +606,8 @@ def _heading_reinit(run: _Run, te: float, P):
     (:mod:`.heading_reinit`); returns ``(P(e|e-1), reset?)``. The update then runs from the
     reset nominal and covariance (its ``P(e|e-1)``, like a gate recovery's)."""
     model = run.model
+    if not run.heading.due(te):  # most epochs: not the nominal's attitude to compute
+        return P, False
     ev = run.heading.check(te, model.nominal(te).C)
     if ev is None:
         return P, False

@@ -142,10 +142,17 @@ class HeadingMonitor:
         if self.start is not None and np.isfinite(nis):
             self.nis.append(float(nis))
 
+    def due(self, time: float) -> bool:
+        """Whether a course sample is due at ``time`` (else :meth:`check` has nothing to do)."""
+        c = self.cfg.course
+        return self.i < c.t.size and c.t[self.i] <= time + 1e-9
+
     def check(self, time: float, C) -> ReinitEvent | None:
         """Course samples up to ``time`` against the nominal attitude ``C`` (before the
         update); a :class:`ReinitEvent` when the heading must be re-initialised."""
         c, cfg = self.cfg.course, self.cfg
+        if not self.due(time):
+            return None
         psi = forward_heading(C)
         event = None
         while self.i < c.t.size and c.t[self.i] <= time + 1e-9:

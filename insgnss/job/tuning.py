@@ -41,6 +41,7 @@ from ..autotune import COAST_SUFFIX, Parameter, TuneResult, tune
 from ..config import Job
 from ..earth import ecef_to_enu_vectors, geodetic_to_ecef
 from ..errors import ConfigError, InsgnssError
+from ..executors import fork_map
 from ..imu import ImuErrorModel
 from ..preprocess import shift_time
 from .context import RunContext
@@ -257,8 +258,11 @@ def autotune(ctx: RunContext, model: ImuErrorModel, run_one, build_aiding
     the values to use and the :class:`~insgnss.autotune.TuneResult`.
 
     Work done once, not per filter run: the time-shifted inputs per offset value and the
-    production GNSS position model per set of GNSS scales and offset. The result records the
-    filter runs of each stage and the wall time (``seconds``).
+    production GNSS position model per set of GNSS scales and offset. The runs the search
+    needs together (the two sides of a bracket) run at once on the further cores
+    (:func:`insgnss.executors.fork_map`: forked helpers, deterministic runs, so the same
+    result as one after the other). The result records the filter runs of each stage and the
+    wall time (``seconds``).
     """
     params = parameters(ctx, model)
     if not params:
@@ -303,19 +307,26 @@ def autotune(ctx: RunContext, model: ImuErrorModel, run_one, build_aiding
             cache[k] = run(theta)
         return cache[k]
 
+    def cached_many(thetas):  # independent runs: on the further cores (forked helpers)
+        todo = [th for th in thetas if tuple(sorted(th.items())) not in cache]
+        for th, res in zip(todo, fork_map(run, todo), strict=True):
+            cache[tuple(sorted(th.items()))] = res
+        return [cache[tuple(sorted(th.items()))] for th in thetas]
+
     t_start = time.perf_counter()
     sweeps = int(ctx.job["filter"]["autotune_sweeps"])
     log = lambda line: _log.info("autotune: %s", line)  # noqa: E731
     # stage 1: the one-step view only, from the priors (a model far off makes the dead
     # reckoning of the coast view diverge, and its likelihood surface rugged)
-    first = tune(cached, params, sweeps=sweeps, types=ONE_STEP, progress=log)
+    first = tune(cached, params, sweeps=sweeps, types=ONE_STEP, progress=log,
+                 run_many=cached_many)
     if not tuning:
         first.seconds = time.perf_counter() - t_start
         return first.values, first
     # stage 2: both views, from the one-step estimates
     start = [replace(p, prior=min(max(first.values[p.name], p.lower), p.upper)) for p in params]
     second = tune(cached, start, sweeps=sweeps, progress=log,
-                  reference={p.name: p.prior for p in params})
+                  reference={p.name: p.prior for p in params}, run_many=cached_many)
     for name, row in second.parameters.items():
         row["one_step_estimate"] = first.parameters[name]["estimate"]
     second.log_likelihood["one_step_prior"] = first.log_likelihood["prior"]
