@@ -250,8 +250,30 @@ def _coverage(res):
     return float(inside.mean()), float(nees.mean())
 
 
-def test_autotune_recovers_known_noise_and_coverage():
-    fixed, tuned = _run(False), _run(True)
+@pytest.fixture(scope="module")
+def forked_tuning():
+    """The simulation's self-tuning job run with one forked helper for the paired filter runs
+    (as on a 2-core machine, whatever this one has): ``(result, helpers per batch)``."""
+    import multiprocessing
+
+    from insgnss import executors
+    from insgnss.job import tuning
+
+    helpers = []
+
+    def counted(fn, items):
+        helpers.append(executors.fork_workers(len(items)))
+        return executors.fork_map(fn, items)
+
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr(tuning, "fork_map", counted)
+        if "fork" in multiprocessing.get_all_start_methods():
+            mp.setattr(executors, "usable_cores", lambda: 2)
+        return _run(True), helpers
+
+
+def test_autotune_recovers_known_noise_and_coverage(forked_tuning):
+    fixed, tuned = _run(False), forked_tuning[0]
     at = tuned.summary["autotune"]["parameters"]
     assert at["gyro_arw"]["value"] == pytest.approx(np.radians(TRUE_ARW) / 60, rel=0.2)
     assert at["accel_vrw"]["value"] == pytest.approx(TRUE_VRW / 60, rel=0.2)
@@ -265,7 +287,7 @@ def test_autotune_recovers_known_noise_and_coverage():
     assert tuned.summary["autotune"]["tuning_windows"]  # the coast view took part
 
 
-def test_forked_runs_tune_as_one_process(monkeypatch):
+def test_forked_runs_tune_as_one_process(forked_tuning, monkeypatch):
     """A job's self-tuning runs the filter for two parameter sets at once in a forked helper:
     the estimates and the trajectory are those of one process (the runs are deterministic)."""
     import multiprocessing
@@ -274,17 +296,7 @@ def test_forked_runs_tune_as_one_process(monkeypatch):
 
     if "fork" not in multiprocessing.get_all_start_methods():
         pytest.skip("forked helpers need fork")
-    from insgnss.job import tuning
-
-    helpers = []
-
-    def counted(fn, items):
-        helpers.append(executors.fork_workers(len(items)))
-        return executors.fork_map(fn, items)
-
-    monkeypatch.setattr(tuning, "fork_map", counted)
-    monkeypatch.setattr(executors, "usable_cores", lambda: 2)
-    forked = _run(True)
+    forked, helpers = forked_tuning
     # a pair: one run here, one in a helper (a pair one of whose runs an earlier stage did:
     # the other alone, here)
     assert set(helpers) == {0, 1} and helpers.count(1) > helpers.count(0)
