@@ -306,8 +306,7 @@ def tune(run: Callable[[dict], pd.DataFrame | None], parameters: Sequence[Parame
         for _ in range(POLISH_STEPS):
             u = p.to_u(theta[p.name])
             d, better = {}, None
-            sides = [(side, uu) for side, uu in (("down", max(u - p.h, lo)),
-                                                 ("up", min(u + p.h, hi)))]
+            sides = (("down", max(u - p.h, lo)), ("up", min(u + p.h, hi)))
             inside = [(side, uu) for side, uu in sides if abs(uu - u) >= 1e-12]
             fs = dict(zip([side for side, _ in inside],
                           objectives([{**theta, p.name: p.to_value(uu)} for _, uu in inside]),

@@ -151,8 +151,6 @@ class HeadingMonitor:
         """Course samples up to ``time`` against the nominal attitude ``C`` (before the
         update); a :class:`ReinitEvent` when the heading must be re-initialised."""
         c, cfg = self.cfg.course, self.cfg
-        if not self.due(time):
-            return None
         psi = forward_heading(C)
         event = None
         while self.i < c.t.size and c.t[self.i] <= time + 1e-9:

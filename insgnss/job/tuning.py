@@ -301,17 +301,20 @@ def autotune(ctx: RunContext, model: ImuErrorModel, run_one, build_aiding
 
     cache: dict = {}
 
+    def key(theta):
+        return tuple(sorted(theta.items()))
+
     def cached(theta):  # both stages run the same filter: reuse what the first one ran
-        k = tuple(sorted(theta.items()))
+        k = key(theta)
         if k not in cache:
             cache[k] = run(theta)
         return cache[k]
 
-    def cached_many(thetas):  # independent runs: on the further cores (forked helpers)
-        todo = [th for th in thetas if tuple(sorted(th.items())) not in cache]
-        for th, res in zip(todo, fork_map(run, todo), strict=True):
-            cache[tuple(sorted(th.items()))] = res
-        return [cache[tuple(sorted(th.items()))] for th in thetas]
+    def cached_many(thetas):  # independent new runs: on the further cores (forked helpers)
+        keys = [key(th) for th in thetas]
+        todo = {k: th for k, th in zip(keys, thetas, strict=True) if k not in cache}
+        cache.update(zip(todo, fork_map(run, list(todo.values())), strict=True))
+        return [cache[k] for k in keys]
 
     t_start = time.perf_counter()
     sweeps = int(ctx.job["filter"]["autotune_sweeps"])
