@@ -675,7 +675,9 @@ SCHEMA: dict[str, Any] = {
                          check=_vector(2, POSITIVE), when=_on("aiding.nhc")),
         "nhc_interval": _spec(_NUM, 0.25, "NHC update interval [s]: the constraint's violations "
                               "(suspension, vibration, slip) are correlated in time, so faster "
-                              "updates over-weight it", check=POSITIVE, when=_on("aiding.nhc"),
+                              "updates over-weight it; each update is placed on a GNSS (odometer, ...) "
+                              "epoch closer than half the interval, where there is one",
+                              check=POSITIVE, when=_on("aiding.nhc"),
                               min_imu_intervals=1),
         "nhc_correlation_time": _spec(_NUM, 0.0, "correlation time of the NHC's violations "
                                       "(side slip, suspension heave) [s]: > 0 models them as a "
@@ -747,8 +749,14 @@ SCHEMA: dict[str, Any] = {
                        when=_is("filter.process_model", "strapdown")),
         "propagation_interval": _spec(_NUM, 0.1, "covariance propagation step [s] (shorter "
                                       "than an IMU interval: every sample)", check=POSITIVE),
-        "epoch_interval": _spec(_NUM, 1.0, "filter epoch grid [s] (smoother storage per "
-                                "epoch)", check=POSITIVE, min_imu_intervals=1),
+        "epoch_interval": _spec(_NUM, 1.0, "longest filter step without a measurement [s]: a "
+                                "grid of epochs (smoother nodes) where the measurement epochs "
+                                "are further apart", check=POSITIVE, min_imu_intervals=1),
+        "epoch_grid": _spec(str, "gaps", "where the epoch_interval grid is laid: 'gaps' (only "
+                            "between measurement epochs further apart than the interval) or "
+                            "'always' (every grid time is a node: P(k|k), P(k|N) on the grid; "
+                            "a Monte Carlo run takes it unless the job sets it)",
+                            choices=["gaps", "always"]),
         "discretization": _spec(str, "second_order", "Phi/Qd discretization",
                                 choices=["second_order", "vanloan"]),
         "kalman": _spec(str, "compiled", "Kalman predict/update of the GNSS and other general "

@@ -38,10 +38,11 @@ percentile table at the outage ends, NEES/NIS, coverage check, throughput) and t
 
 from __future__ import annotations
 
+import copy
 import json
 import time as _time
 import tomllib
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -276,6 +277,10 @@ def run_one(job: Job | dict | str | Path, seed: int, settings: MonteCarloSetting
                           "inputs.imu.path", file=job.path)
     settings = settings or MonteCarloSettings.from_table(job.simulation.get("montecarlo"),
                                                          job.path)
+    if "filter.epoch_grid" not in job.given:  # the NEES needs P(k|k), P(k|N) on the grid
+        values = copy.deepcopy(job.settings)
+        values["filter"]["epoch_grid"] = "always"
+        job = replace(job, settings=values)
     res = run_job(job, progress=False, seed=int(seed))
     if res.failure is not None:
         raise res.failure

@@ -59,3 +59,40 @@ def test_no_high_rate_measurements():
     s = build_schedule(t, [np.array([0.5, 1.0])], 1.0, 1e-6, True, [])
     assert s.hr_ptr.shape == (t.size + 1,) and not s.hr_ptr.any()
     assert s.hr_m.size == 0 and not s.dense.any() and s.dense_samples == 0
+
+
+def test_grid_epochs_only_fill_gaps_longer_than_the_interval():
+    """Measurements every 0.25 s need no 1 s grid; a 3 s outage gets grid epochs inside it,
+    none more than the interval from the next node; both ends are always epochs."""
+    t = np.round(np.arange(0.0, 10.0 + 1e-9, 0.01), 10)
+    meas = np.round(np.arange(0.13, 10.0, 0.25), 10)
+    meas = meas[(meas < 4.0) | (meas > 7.0)]  # an outage 4.0 .. 7.0 s
+    for split in (True, False):  # between samples (strapdown) or at them (RISS)
+        s = build_schedule(t, [meas], 1.0, 1e-6, split, [])
+        grid = s.epochs[np.diff(s.ptr) == 0]  # the epochs without a measurement
+        assert grid[0] == t[0] and grid[-1] == t[-1]
+        inner = grid[1:-1]
+        assert inner.size == 4 and np.all((inner > 3.87) & (inner < 7.13))  # in the outage
+        assert np.max(np.diff(s.epochs)) <= 1.0 + 1e-9
+
+
+def test_gap_grid_keeps_ends_and_long_gaps():
+    from insgnss.filter.schedule import gap_grid
+
+    grid = np.arange(0.0, 6.0 + 1e-9, 1.0)
+    keep = gap_grid(grid, np.array([0.5, 1.2, 1.9, 4.9]), 1.0, 1e-6)
+    # gaps: 0..0.5, 0.5..1.2, 1.2..1.9, 1.9..4.9 (3 s: 2, 3, 4 kept), 4.9..6.0 (1.1 s: 5)
+    np.testing.assert_array_equal(keep, [True, False, True, True, True, True, True])
+    assert gap_grid(grid, np.empty(0), 1.0, 1e-6).all()
+
+
+def test_epoch_grid_always_keeps_every_grid_time():
+    t = np.round(np.arange(0.0, 10.0 + 1e-9, 0.01), 10)
+    meas = np.round(np.arange(0.13, 10.0, 0.25), 10)
+    s = build_schedule(t, [meas], 1.0, 1e-6, True, [], grid_in_gaps=False)
+    np.testing.assert_allclose(s.epochs[np.diff(s.ptr) == 0], np.arange(0.0, 10.5, 1.0))
+    from insgnss.errors import ConfigError
+    from insgnss.filter.engine import FilterConfig
+
+    with pytest.raises(ConfigError, match="epoch_grid"):
+        FilterConfig(epoch_grid="sometimes").validate()

@@ -190,3 +190,35 @@ def test_zupt_without_a_stop_warns_but_runs():
     assert res.summary["complete"]
     assert any("zupt: none applied" in str(w.message) for w in rec)
     assert any(n.startswith("zupt: none applied") for n in res.summary["aiding_warnings"])
+
+
+def test_constraint_times_share_the_epochs_the_filter_has():
+    """The NHC grid moves onto the GNSS epochs closer than half its interval: with GNSS at its
+    rate every constraint is a row of a GNSS epoch; with 1 Hz GNSS one in four; none in an
+    outage; at most one constraint per epoch and the spacing stays about the interval."""
+    from insgnss.job.aiding import constraint_times
+
+    t0, t1, dt = 100.0, 160.0, 0.25
+    gnss = np.round(np.arange(100.149, 160.0, 0.25), 6)  # 4 Hz, another phase
+    gnss = gnss[(gnss < 120.0) | (gnss > 135.0)]         # a 15 s outage
+    tn = constraint_times(t0, t1, dt, gnss)
+    grid = t0 + np.arange(1, int((t1 - t0) / dt)) * dt
+    assert tn.size == grid.size
+    on = np.isin(tn, gnss)
+    assert on.sum() == gnss[gnss < t1 - 0.2].size
+    inside = (tn > 120.0) & (tn < 135.0)
+    np.testing.assert_allclose(tn[inside], grid[(grid > 120.0) & (grid < 135.0)])
+    assert np.all(np.abs(tn - grid) < 0.5 * dt)
+    # 1 Hz GNSS: a quarter of the constraints on its epochs, no epoch taken twice
+    g1 = np.arange(100.9, 160.0, 1.0)
+    tn1 = constraint_times(t0, t1, dt, g1)
+    assert tn1.size == grid.size and np.isin(tn1, g1).sum() == np.sum(g1 < grid[-1] + 0.5 * dt)
+    # GNSS denser than the grid (10 Hz): every constraint on an epoch, each a different one
+    g10 = np.round(np.arange(100.03, 160.0, 0.1), 6)
+    tn10 = constraint_times(t0, t1, dt, g10)
+    assert np.isin(tn10, g10).all() and np.unique(tn10).size == tn10.size == grid.size
+    # an epoch half an interval from two grid times moves neither (a tie); closer, the nearest
+    np.testing.assert_array_equal(constraint_times(0.0, 2.0, 0.5, [0.75]), [0.5, 1.0, 1.5])
+    np.testing.assert_array_equal(constraint_times(0.0, 2.0, 0.5, [0.76]), [0.5, 0.76, 1.5])
+    # no epochs: the plain grid
+    np.testing.assert_array_equal(constraint_times(t0, t1, dt, []), grid)

@@ -314,3 +314,23 @@ def test_local_pool_reports_a_dead_worker():
         assert out[0].error.type == "BrokenProcessPool"
         ok = ex.run(divmod, [(7, 2), (9, 4)])
         assert [o.value for o in ok] == [(3, 1), (2, 1)]
+
+
+def test_runs_lay_the_epoch_grid_at_every_grid_time(monkeypatch):
+    """The NEES needs P at the grid epochs: a run sets ``filter.epoch_grid = "always"`` unless
+    the job sets the key itself."""
+    import insgnss.pipeline
+
+    seen = []
+
+    def capture(job, **kw):
+        seen.append(job["filter"]["epoch_grid"])
+        raise RuntimeError("captured")
+
+    monkeypatch.setattr(insgnss.pipeline, "run_job", capture)
+    for extra, want in (("", "always"), ('epoch_grid = "gaps"\n', "gaps")):
+        job = tomllib.loads(TINY.replace('bias_model = "random_walk"\n',
+                                         'bias_model = "random_walk"\n' + extra))
+        with pytest.raises(RuntimeError, match="captured"):
+            run_one(job, 1)
+        assert seen[-1] == want

@@ -62,7 +62,7 @@ from .kalman import backend as kalman_backend
 from .measurements import Measurement
 from .models import BIAS_MODELS, ERROR_DYNAMICS, StateLayout
 from .process import ProcessModelBase
-from .schedule import build_schedule
+from .schedule import EPOCH_GRIDS, build_schedule
 from .smoother import smooth
 from .store import InnovationLog, NodeStore, Table, innovation_tables
 from .strapdown_model import DISCRETIZATIONS, STD_COLS, StrapdownModel, levelling_covariance
@@ -94,6 +94,11 @@ class FilterConfig:
         Covariance sub-interval [s] over which F is averaged for ``Phi, Qd``.
     epoch_interval : float
         Longest time between filter epochs without measurements [s].
+    epoch_grid : {"gaps", "always"}
+        Where the grid of epochs every ``epoch_interval`` is laid: only inside the gaps between
+        measurement epochs longer than the interval (``"gaps"``, :func:`.schedule.gap_grid`)
+        or at every grid time (``"always"``: nodes, ``P(k|k)`` and ``P(k|N)``, at the grid
+        times, e.g. for a Monte Carlo NEES on a time grid).
     discretization : {"second_order", "vanloan"}
     gate_probability : float or None
         Default chi-square gating probability; ``None`` or 0 disables gating.
@@ -180,6 +185,7 @@ class FilterConfig:
     scale_factors: bool = False
     propagation_interval: float = 0.1
     epoch_interval: float = 1.0
+    epoch_grid: str = "gaps"
     discretization: str = "second_order"
     gate_probability: float | None = 0.9999
     gate_probabilities: dict = field(default_factory=dict)
@@ -220,6 +226,9 @@ class FilterConfig:
         if self.discretization not in DISCRETIZATIONS:
             raise ConfigError("unknown discretization", column="discretization",
                               expected=list(DISCRETIZATIONS), found=self.discretization)
+        if self.epoch_grid not in EPOCH_GRIDS:
+            raise ConfigError("unknown epoch_grid", column="epoch_grid",
+                              expected=list(EPOCH_GRIDS), found=self.epoch_grid)
         for key in ("propagation_interval", "epoch_interval"):
             v = getattr(self, key)
             if not (np.isfinite(v) and v > 0):
@@ -417,7 +426,8 @@ class _Run:
         t = model.t
         tol = min(config.snap_tolerance, 1e-3 * float(np.median(np.diff(t))))
         self.sched = build_schedule(t, [m.times for m in self.general], config.epoch_interval,
-                                    tol, model.split, [m.times for m in self.fast])
+                                    tol, model.split, [m.times for m in self.fast],
+                                    grid_in_gaps=config.epoch_grid == "gaps")
         # the constraints are watched only in runs without absolute measurements (health.py)
         self.runaway = RunawayNis(len(names), config.nis_window if self.check else None,
                                   config.nis_bound, config.nis_min_count,

@@ -1,8 +1,9 @@
 """Epoch schedule of the filter engine.
 
 Filter *epochs* are the times of the measurements handled by the Python update path plus a grid
-every ``epoch_interval`` seconds (so that the stored covariances and the smoother have nodes
-during long outages) and the last IMU time. How a measurement time becomes an epoch depends on
+every ``epoch_interval`` seconds where those are further apart (so that the stored covariances
+and the smoother have nodes during long outages; :func:`gap_grid`) and the first and last IMU
+times. How a measurement time becomes an epoch depends on
 the process model:
 
 - ``split=True`` (strapdown): times closer than ``tol`` to an IMU sample are moved onto it, the
@@ -27,7 +28,10 @@ from numba import njit
 
 from ..aot import entry
 
-__all__ = ["Schedule", "build_schedule"]
+__all__ = ["EPOCH_GRIDS", "Schedule", "build_schedule", "gap_grid"]
+
+#: where the epoch grid is laid (:class:`insgnss.filter.engine.FilterConfig` ``epoch_grid``)
+EPOCH_GRIDS = ("gaps", "always")
 
 
 @dataclass
@@ -75,7 +79,22 @@ def _snap(t, x, tol):
     return np.where(np.abs(t[near] - x) <= tol, t[near], x)
 
 
-def _split_epochs(t, times, epoch_interval, tol):
+def gap_grid(grid, times, interval: float, tol: float) -> np.ndarray:
+    """Which times of the epoch grid ``grid`` (increasing, its first and last the first and
+    last epoch) are needed: those inside a gap between the measurement epochs ``times``
+    longer than ``interval`` (+ ``tol``), and the first and the last. Elsewhere the
+    measurement epochs are nodes close enough, and a grid epoch would only split a covariance
+    propagation (which sub-steps by itself) and add a smoother node."""
+    keep = np.ones(grid.size, bool)
+    if grid.size <= 2 or not np.size(times):
+        return keep
+    tm = np.unique(np.concatenate([np.asarray(times, float), grid[[0, -1]]]))
+    k = np.clip(np.searchsorted(tm, grid, side="right"), 1, tm.size - 1)
+    keep[1:-1] = (tm[k] - tm[k - 1])[1:-1] > interval + tol
+    return keep
+
+
+def _split_epochs(t, times, epoch_interval, tol, in_gaps=True):
     t0, t1 = t[0], t[-1]
     evs = []
     for k, tm in enumerate(times):
@@ -84,13 +103,15 @@ def _split_epochs(t, times, epoch_interval, tol):
     n_grid = int(np.floor((t1 - t0) / epoch_interval + 1e-9))
     grid = _snap(t, np.append(t0 + epoch_interval * np.arange(n_grid + 1), t1), tol)
     ev_m, ev_r, ev_t = _cat(evs)
+    if in_gaps:
+        grid = grid[gap_grid(grid, ev_t, epoch_interval, tol)]
     ep = np.unique(np.concatenate([grid, ev_t]))
     ep = ep[np.concatenate([[True], np.diff(ep) > tol])]  # merge epochs closer than tol
     ev_e = np.clip(np.searchsorted(ep, ev_t - tol), 0, ep.size - 1)
     return ep, ev_e, ev_m, ev_r, ep[ev_e]  # the event is at its (merged) epoch
 
 
-def _sample_epochs(t, times, epoch_interval):
+def _sample_epochs(t, times, epoch_interval, in_gaps=True):
     dt = float(np.median(np.diff(t)))
     evs = []
     for k, tm in enumerate(times):
@@ -100,7 +121,10 @@ def _sample_epochs(t, times, epoch_interval):
     ev_m, ev_r, ev_t = _cat(evs)
     ev_j = np.searchsorted(t, ev_t + 1e-9, side="right") - 1
     step = max(int(round(epoch_interval / dt)), 1)
-    idx = np.union1d(np.arange(0, t.size, step), ev_j)
+    grid = np.arange(0, t.size, step)
+    if in_gaps:
+        grid = grid[gap_grid(t[grid], t[ev_j], epoch_interval, 0.5 * dt)]
+    idx = np.union1d(grid, ev_j)
     if idx[-1] != t.size - 1:
         idx = np.append(idx, t.size - 1)
     ev_e = np.searchsorted(idx, ev_j)
@@ -116,14 +140,16 @@ def _cat(evs):
 
 
 def build_schedule(t: np.ndarray, times: list, epoch_interval: float, tol: float,
-                   split: bool = True, high_rate_times: list | None = None) -> Schedule:
+                   split: bool = True, high_rate_times: list | None = None,
+                   grid_in_gaps: bool = True) -> Schedule:
     """Epoch schedule for IMU times ``t``, the epoch times of the Python-path measurements
-    (``times``, one array per measurement) and of the high-rate ones (module docstring)."""
+    (``times``, one array per measurement) and of the high-rate ones (module docstring);
+    ``grid_in_gaps=False`` keeps every time of the epoch grid (:func:`gap_grid`)."""
     times = [np.asarray(x, float) for x in times]
     if split:
-        ep, ev_e, ev_m, ev_r, ev_t = _split_epochs(t, times, epoch_interval, tol)
+        ep, ev_e, ev_m, ev_r, ev_t = _split_epochs(t, times, epoch_interval, tol, grid_in_gaps)
     else:
-        ep, ev_e, ev_m, ev_r, ev_t = _sample_epochs(t, times, epoch_interval)
+        ep, ev_e, ev_m, ev_r, ev_t = _sample_epochs(t, times, epoch_interval, grid_in_gaps)
     order = np.lexsort((ev_r, ev_m, ev_e))
     ev_e, ev_m, ev_r, ev_t = ev_e[order], ev_m[order], ev_r[order], ev_t[order]
     ptr = np.searchsorted(ev_e, np.arange(ep.size + 1))
