@@ -45,7 +45,7 @@ from numba import njit
 
 from ..aot import entry
 from ..attitude import wrap_pi
-from ..earth import OMEGA_E, normal_gravity
+from ..earth import GRAVITY_SOMIGLIANA, OMEGA_E, normal_gravity_sc
 from ..errors import InputFormatError, InvalidValueError
 from .models import ExtraState, StateLayout
 
@@ -846,6 +846,10 @@ class BodyVelocity(Measurement):
         spec = getattr(self, "_spec", None)
         if spec is not None and spec[0] is layout:
             return spec[1]
+        # columns of the violation and pitch-compliance states (-1: none) for constraint_terms
+        self._terms = (layout.index(self.violation_state) if self.violation_state else -1,
+                       layout.index(self.pitch_compliance_state)
+                       if self.pitch_compliance_state else -1)
         ip = np.full(8, -1, np.int64)
         ip[0] = self.axes.size
         ip[1:1 + self.axes.size] = self.axes
@@ -864,25 +868,48 @@ class BodyVelocity(Measurement):
         if out is None or not (self.pitch_compliance_state or self.violation_state):
             return out
         z, H, R = out
-        if self.violation_state:  # the violation adds to the constrained components
-            iv = nav.layout.index(self.violation_state)
-            k = self.axes.size
-            z += nav.params[iv - 9:iv - 9 + k]
-            H[:, iv:iv + k] += np.eye(k)
-        if not self.pitch_compliance_state:
-            return z, H, R
-        ik = nav.layout.index(self.pitch_compliance_state)
-        kappa = nav.params[ik - 9]
-        c1, g = nav.C[:, 1], normal_gravity(nav.lat, nav.height)
-        # forward acceleration: compensated specific force plus gravity (g^l = -g up), body
-        # forward axis; the forward body velocity of the IMU
-        a_f = nav.f_ib_mean[1] - g * c1[2]
-        v_f = float(c1 @ nav.vel)
-        r = int(np.flatnonzero(self.axes == 2)[0])
-        z[r] += kappa * a_f * v_f
-        # nominal minus true: C_nom = (I + [phi x]) C, f_nom = f - db_a
-        H[r, 3:6] += kappa * a_f * c1
-        H[r, 6:9] += kappa * (a_f * cross3(c1, nav.vel) - v_f * g * np.array([c1[1], -c1[0], 0.0]))
-        H[r, 13] -= kappa * v_f
-        H[r, ik] = a_f * v_f
+        iv, ik = self._terms
+        constraint_terms(z, H, nav.params, self.axes, iv, ik, nav.C, nav.vel, nav.f_ib_mean,
+                         nav.lat, nav.height)
         return z, H, R
+
+
+@entry
+@njit(cache=True)
+def constraint_terms(z, H, params, axes, iv, ik, C, vel, f_ib_mean, lat, height):
+    """The state terms of :class:`BodyVelocity` beyond the compiled body velocity, added to
+    its ``z`` and ``H`` in place (``params``: the nominal parameter states, column 9 on):
+
+    - violation states ``s`` (column ``iv``, one per constrained axis): ``h_k += s_k``;
+    - suspension pitch compliance ``kappa`` (column ``ik``), on the vertical axis:
+      ``h += kappa a_f v_f`` with the forward acceleration ``a_f = f_f - g C[2, 1]`` (normal
+      gravity, Somigliana) and the forward body velocity ``v_f = C[:, 1] . v``; its Jacobian
+      ``kappa a_f C[:, 1]`` in ``dv``, ``kappa (a_f C[:, 1] x v - v_f g (C[1, 1], -C[0, 1],
+      0))`` in ``phi``, ``-kappa v_f`` in the forward accelerometer bias, ``a_f v_f`` in
+      ``kappa`` (nominal minus true: ``C_nom = (I + [phi x]) C``, ``f_nom = f - db_a``).
+    """
+    if iv >= 0:
+        for r in range(axes.shape[0]):
+            z[r] += params[iv - 9 + r]
+            H[r, iv + r] += 1.0
+    if ik < 0:
+        return
+    kappa = params[ik - 9]
+    g = normal_gravity_sc(np.sin(lat), np.cos(lat), height, GRAVITY_SOMIGLIANA)
+    c1 = np.empty(3)
+    for q in range(3):
+        c1[q] = C[q, 1]
+    a_f = f_ib_mean[1] - g * c1[2]
+    v_f = c1[0] * vel[0] + c1[1] * vel[1] + c1[2] * vel[2]
+    r = 0
+    while axes[r] != 2:
+        r += 1
+    z[r] += kappa * a_f * v_f
+    cx = _cross3(c1, vel)
+    for q in range(3):
+        H[r, 3 + q] += kappa * a_f * c1[q]
+    H[r, 6] += kappa * (a_f * cx[0] - v_f * g * c1[1])
+    H[r, 7] += kappa * (a_f * cx[1] + v_f * g * c1[0])
+    H[r, 8] += kappa * (a_f * cx[2])
+    H[r, 13] -= kappa * v_f
+    H[r, ik] = a_f * v_f
