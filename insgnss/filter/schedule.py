@@ -28,7 +28,7 @@ from numba import njit
 
 from ..aot import entry
 
-__all__ = ["EPOCH_GRIDS", "Schedule", "build_schedule", "gap_grid"]
+__all__ = ["EPOCH_GRIDS", "Schedule", "build_schedule", "gap_grid", "snap"]
 
 #: where the epoch grid is laid (:class:`insgnss.filter.engine.FilterConfig` ``epoch_grid``)
 EPOCH_GRIDS = ("gaps", "always")
@@ -72,10 +72,15 @@ class Schedule:
         return self.epochs.size
 
 
-def _snap(t, x, tol):
-    """Move the times ``x`` onto the nearest IMU sample when closer than ``tol``."""
-    j = np.clip(np.searchsorted(t, x), 1, t.size - 1)
-    near = np.where(np.abs(t[j] - x) < np.abs(t[j - 1] - x), j, j - 1)
+def snap(t, x, tol):
+    """Move the times ``x`` onto the nearest of the increasing times ``t`` (an IMU sample, an
+    epoch; a tie to the earlier) when closer than ``tol`` (inclusive); the others stay."""
+    x = np.asarray(x, float)
+    if t.size < 2:
+        near = np.zeros(x.shape, np.int64)
+    else:
+        j = np.clip(np.searchsorted(t, x), 1, t.size - 1)
+        near = np.where(np.abs(t[j] - x) < np.abs(t[j - 1] - x), j, j - 1)
     return np.where(np.abs(t[near] - x) <= tol, t[near], x)
 
 
@@ -99,9 +104,9 @@ def _split_epochs(t, times, epoch_interval, tol, in_gaps=True):
     evs = []
     for k, tm in enumerate(times):
         rows = np.nonzero((tm >= t0 - tol) & (tm <= t1 + tol))[0]
-        evs.append((np.full(rows.size, k), rows, _snap(t, np.clip(tm[rows], t0, t1), tol)))
+        evs.append((np.full(rows.size, k), rows, snap(t, np.clip(tm[rows], t0, t1), tol)))
     n_grid = int(np.floor((t1 - t0) / epoch_interval + 1e-9))
-    grid = _snap(t, np.append(t0 + epoch_interval * np.arange(n_grid + 1), t1), tol)
+    grid = snap(t, np.append(t0 + epoch_interval * np.arange(n_grid + 1), t1), tol)
     ev_m, ev_r, ev_t = _cat(evs)
     if in_gaps:
         grid = grid[gap_grid(grid, ev_t, epoch_interval, tol)]

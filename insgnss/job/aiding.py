@@ -49,6 +49,7 @@ from ..filter.measurements import (
     Zaru,
     Zupt,
 )
+from ..filter.schedule import snap
 from ..validate import check_gnss_in_imu_span, warn
 from .inputs import Inputs
 from .windows import describe_windows, outside_windows
@@ -619,13 +620,9 @@ def constraint_times(t0: float, t1: float, interval: float, epochs) -> np.ndarra
     ep = ep[(ep > t0) & (ep < t1)]
     if not (grid.size and ep.size):
         return grid
-    j = np.clip(np.searchsorted(ep, grid), 1, ep.size - 1) if ep.size > 1 \
-        else np.zeros(grid.size, int)
-    if ep.size > 1:
-        j = np.where(np.abs(ep[j - 1] - grid) <= np.abs(ep[j] - grid), j - 1, j)
-    # closer than half the interval: no two grid times (an interval apart) take one epoch,
-    # and the times stay in order
-    return np.where(np.abs(ep[j] - grid) < 0.5 * interval, ep[j], grid)
+    # strictly closer than half the interval: no two grid times (an interval apart) take one
+    # epoch, and the times stay in order
+    return snap(ep, grid, np.nextafter(0.5 * interval, 0.0))
 
 
 def _nhc_source(job: Job, imu: pd.DataFrame, models: list) -> Source:
