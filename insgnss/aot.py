@@ -13,13 +13,16 @@ run calls machine code that is already there:
   the argument types it calls them with, recorded per process; each ``(kernel, argument
   types)`` is exported once (:func:`entries`). A kernel's callees are compiled into it.
 - **how a call finds it**: the kernels of the manifest are decorated with :func:`entry`, which
-  wraps the numba dispatcher in an :class:`Entry` when the module holds exports of it. A call
-  from Python whose arguments have exactly an export's types (array dtype, dimensions and
-  layout; a writable array where the export may write; Python or NumPy floats, ints and bools
-  where those are expected: :func:`argument_check`) runs the export; any other call goes to the
+  attaches the module's exports of it to the :class:`insgnss.jit.Kernel`. A call from Python
+  whose arguments have exactly an export's types (array dtype, dimensions and layout; a
+  writable array where the export may write; Python or NumPy floats, ints and bools where
+  those are expected: :func:`argument_check`) runs the export; any other call goes to the
   numba dispatcher as before (compiled or loaded from the cache on first use). numba-compiled
-  code that calls the kernel sees the dispatcher itself (``typeof`` of an :class:`Entry`), so
-  the JIT path is unchanged.
+  code that calls the kernel sees the dispatcher itself, so the JIT path is unchanged.
+- **no numba at run time**: the recorded argument types are read without numba
+  (:func:`insgnss.kernel_manifest.argument_kinds`), and a kernel makes its numba dispatcher
+  only when a call needs it (:mod:`insgnss.jit`): a run whose calls all have exports never
+  imports numba (0.2 s of its start).
 - **the same code**: the module records a digest of the package's Python sources and of the
   manifest (:func:`source_digest`) when it is built; a module whose digest differs from the
   sources beside it (an edited checkout not rebuilt) is not used. The exports are compiled by
@@ -38,6 +41,9 @@ from __future__ import annotations
 import hashlib
 import os
 from pathlib import Path
+
+from .jit import Kernel
+from .kernel_manifest import ArrayArg, OmittedArg, ScalarArg, argument_kinds, numba_types, read_only
 
 #: the extension module built by setup.py (:func:`compiler`)
 MODULE = "insgnss._aot"
@@ -90,12 +96,11 @@ def entries(manifest: dict | None = None) -> list[dict]:
 # --- the argument check of an export --------------------------------------------------------------
 
 def _condition(t, a: str) -> str | None:
-    """Python expression true when argument ``a`` has the numba type ``t`` exactly as numba's
-    dispatcher would type it (None: a type the exports do not take)."""
-    from numba.core import types
-
-    if isinstance(t, types.Array):
-        if t.layout not in "CFA" or not isinstance(t.dtype, types.Number | types.Boolean):
+    """Python expression true when argument ``a`` has the type ``t``
+    (:func:`insgnss.kernel_manifest.argument_kinds`) exactly as numba's dispatcher would type
+    it (None: a type the exports do not take)."""
+    if isinstance(t, ArrayArg):
+        if t.layout not in "CFA":
             return None
         # a dtype compares fastest by identity with numpy's canonical instance (a third of the
         # time of ``== "float64"``), equal but other instances (byte order spelt out) after it
@@ -109,45 +114,44 @@ def _condition(t, a: str) -> str | None:
             flags.append("f_contiguous")
         if t.aligned:
             flags.append("aligned")
-        if t.mutable:  # the export may write into it: a read-only array takes the JIT path
+        if not t.readonly:  # the export may write into it: a read-only array takes the JIT path
             flags.append("writeable")
         if flags:  # one flags object (each ``.flags`` makes a new one)
             cond += [f"(f := {a}.flags).{flags[0]}"] + [f"f.{f}" for f in flags[1:]]
         return " and ".join(cond)
-    if t == types.float64:
+    if not isinstance(t, ScalarArg):
+        return None
+    if t.name == "float64":
         return f"(type({a}) is float or type({a}) is float64)"
-    if t == types.int64:
+    if t.name == "int64":
         return (f"((type({a}) is int and -9223372036854775808 <= {a} <= 9223372036854775807)"
                 f" or type({a}) is int64)")
-    if t == types.boolean:
+    if t.name == "bool":
         return f"(type({a}) is bool or type({a}) is bool_)"
-    if t == types.none:
+    if t.name == "none":
         return f"{a} is None"
     return None
 
 
 def export_signature(sig: tuple) -> tuple[tuple, tuple]:
     """``(types the export takes, defaults)``: the trailing arguments a call left out
-    (numba's ``omitted(default=None)``) become ``none`` arguments of the export, which the
-    call's defaults fill (``defaults``: the values appended to the call's arguments); other
-    omitted arguments are not exported (None)."""
-    from numba.core import types
-
+    (``omitted(default=None)``) become ``none`` arguments of the export, which the call's
+    defaults fill (``defaults``: the values appended to the call's arguments); other omitted
+    arguments are not exported (None)."""
     n = len(sig)
-    while n and isinstance(sig[n - 1], types.Omitted):
+    while n and isinstance(sig[n - 1], OmittedArg):
         n -= 1
-    pad = tuple(t.value for t in sig[n:])
-    if any(isinstance(t, types.Omitted) for t in sig[:n]) or any(v is not None for v in pad):
+    pad = tuple(t.default for t in sig[n:])
+    if any(isinstance(t, OmittedArg) for t in sig[:n]) or any(v is not None for v in pad):
         return None, None
-    return tuple(sig[:n]) + (types.none,) * len(pad), pad
+    return tuple(sig[:n]) + (ScalarArg("none"),) * len(pad), pad
 
 
-def _export_types(e: dict, ns: dict) -> tuple:
+def _export_types(e: dict) -> tuple:
     """``(recorded types, export types, defaults)`` of manifest entry ``e``
-    (:func:`export_signature`); export types None where no export can take the entry."""
-    from .kernel_manifest import argument_types
-
-    sig = argument_types(e["args"], ns)
+    (:func:`insgnss.kernel_manifest.argument_kinds`, :func:`export_signature`); export types
+    None where no export can take the entry. Raises for a type no export takes."""
+    sig = argument_kinds(e["args"])
     args, pad = export_signature(sig)
     if args is not None and argument_check(args) is None:
         args = None
@@ -165,7 +169,7 @@ def argument_check(sig: tuple):
         return None
     body = " and ".join(conds) if conds else "True"
     ns = {"ndarray": np.ndarray, "float64": np.float64, "int64": np.int64, "bool_": np.bool_}
-    ns.update({f"dtype_{t.dtype}": np.dtype(str(t.dtype)) for t in sig if hasattr(t, "ndim")})
+    ns.update({f"dtype_{t.dtype}": np.dtype(t.dtype) for t in sig if isinstance(t, ArrayArg)})
     exec(f"def check({', '.join(names)}):\n    return {body}\n", ns)  # noqa: S102
     return ns["check"]
 
@@ -193,9 +197,7 @@ def _load() -> dict:
         _STATUS = ("stale (the sources changed since insgnss._aot was built: "
                    "reinstall to rebuild it; the kernels are compiled by numba meanwhile)")
         return {}
-    from .kernel_manifest import type_namespace
-
-    ns, table = type_namespace(), {}
+    table = {}
     for i, e in enumerate(entries()):
         fn = getattr(_aot, f"k{i}r", None)  # read-only arrays (:func:`exports`)
         relaxed = fn is not None
@@ -203,8 +205,8 @@ def _load() -> dict:
         if fn is None:
             continue
         try:
-            _, args, pad = _export_types(e, ns)
-        except Exception:  # noqa: BLE001 (a type this numba does not know: the JIT path)
+            _, args, pad = _export_types(e)
+        except Exception:  # noqa: BLE001 (a type no export takes: the JIT path)
             continue
         if args is None:
             continue
@@ -229,53 +231,17 @@ def status() -> str:
     return _STATUS
 
 
-class Entry:
-    """A numba dispatcher whose calls from Python run an ahead-of-time export when the
-    arguments have its types (module docstring); any other call, and every attribute, is the
-    dispatcher's."""
-
-    def __init__(self, disp, exports: list):
-        self._disp = disp
-        self._exports = tuple(exports)
-        self.__wrapped__ = disp
-        f = disp.py_func
-        self.__doc__, self.__name__, self.__qualname__, self.__module__ = (
-            f.__doc__, f.__name__, f.__qualname__, f.__module__)
-
-    def __call__(self, *args, **kwargs):
-        if not kwargs:
-            n = len(args)
-            for m, check, fn, pad in self._exports:
-                if m == n and check(*args):
-                    return fn(*args, *pad) if pad else fn(*args)
-        return self._disp(*args, **kwargs)
-
-    def __getattr__(self, name):
-        return getattr(self._disp, name)
-
-    def __repr__(self) -> str:
-        return f"<insgnss.aot.Entry of {self._disp!r}: {len(self._exports)} exports>"
-
-
-def _register_typeof() -> None:
-    """numba code that calls an :class:`Entry` calls its dispatcher (the JIT path)."""
-    from numba.core import types
-    from numba.extending import typeof_impl
-
-    @typeof_impl.register(Entry)
-    def _typeof_entry(val, c):
-        return types.Dispatcher(val._disp)
-
-
-_register_typeof()
-
-
-def entry(disp):
-    """Decorator above ``@njit`` of a kernel of the manifest: an :class:`Entry` when the built
-    module exports it, else the dispatcher unchanged."""
-    f = disp.py_func
-    exports = table().get(f"{f.__module__}.{f.__qualname__}")
-    return Entry(disp, exports) if exports else disp
+def entry(kernel):
+    """Decorator above ``@njit`` (:func:`insgnss.jit.njit`) of a kernel of the manifest: its
+    calls from Python run the built module's exports when the arguments have their types
+    (:attr:`insgnss.jit.Kernel.exports`). A numba dispatcher is wrapped in a
+    :class:`~insgnss.jit.Kernel` of it first."""
+    if not isinstance(kernel, Kernel):
+        kernel = Kernel(kernel.py_func, dispatcher=kernel)
+    exports = table().get(f"{kernel.__module__}.{kernel.__qualname__}")
+    if exports:
+        kernel.exports = tuple(exports)
+    return kernel
 
 
 # --- the build ------------------------------------------------------------------------------------
@@ -286,23 +252,22 @@ def exports() -> list[tuple[str, object, object]]:
     that no longer resolve or whose types an export cannot take are left out."""
     from importlib import import_module
 
-    from .kernel_manifest import type_namespace
-
-    ns, out = type_namespace(), []
+    out = []
     for i, e in enumerate(entries()):
         try:
             disp = getattr(import_module(e["module"]), e["name"])
-            disp = getattr(disp, "_disp", disp)  # an Entry of an earlier build
-            sig, args, _ = _export_types(e, ns)
+            disp = getattr(disp, "dispatcher", disp)  # a Kernel: its numba dispatcher
+            sig, args, _ = _export_types(e)
             if args is None:
                 continue
+            sig, args = numba_types(sig), numba_types(args)
             disp.compile(sig)
             ret = disp.overloads[sig].signature.return_type
         except Exception:  # noqa: BLE001 (a stale entry: that kernel takes the JIT path)
             continue
         # the kernel typed with every array argument read-only, where it writes none of them
         # (an export that takes a read-only array takes a writable one as well)
-        ro = read_only(args)
+        ro = _read_only_types(args)
         if ro != args and _types(disp.py_func, ro, ret):
             out.append((f"k{i}r", ret(*ro), disp.py_func))
         elif _types(disp.py_func, args, ret):
@@ -310,8 +275,8 @@ def exports() -> list[tuple[str, object, object]]:
     return out
 
 
-def read_only(sig: tuple) -> tuple:
-    """``sig`` with every array type read-only."""
+def _read_only_types(sig: tuple) -> tuple:
+    """numba types ``sig`` with every array type read-only."""
     from numba.core import types
 
     return tuple(t.copy(readonly=True) if isinstance(t, types.Array) else t for t in sig)
@@ -368,5 +333,5 @@ def compiler(output_dir: str | os.PathLike | None = None):
     return cc
 
 
-__all__ = ["ENV_CPU", "ENV_SWITCH", "Entry", "MODULE", "argument_check", "compiler", "entries",
+__all__ = ["ENV_CPU", "ENV_SWITCH", "MODULE", "argument_check", "compiler", "entries",
            "entry", "export_signature", "exports", "read_only", "source_digest", "status", "table"]

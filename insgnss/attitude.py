@@ -22,7 +22,8 @@ roll = roll, pitch = pitch, yaw = heading.
 from __future__ import annotations
 
 import numpy as np
-from numba import njit
+
+from .jit import njit
 
 #: ENU <-> NED and RFU <-> FRD axis permutation (symmetric, its own inverse)
 P_SWAP = np.array([[0.0, 1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, -1.0]])

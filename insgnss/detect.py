@@ -114,11 +114,11 @@ from dataclasses import asdict, dataclass, fields
 
 import numpy as np
 import pandas as pd
-from numba import njit
 
 from .aot import entry
 from .errors import ConfigError
 from .imu import ACCEL_COLS, DTHETA_COLS, DV_COLS, GYRO_COLS, is_increment_table
+from .jit import njit
 from .validate import time_slice
 
 METHODS = ("shoe", "amv", "are", "mag", "adaptive", "valley")

@@ -20,10 +20,10 @@ References
 from __future__ import annotations
 
 import numpy as np
-from numba import njit
 
 from .aot import entry
 from .errors import InvalidValueError
+from .jit import njit
 
 # --- WGS84 ellipsoid (GRS80 differs only in 1/f in the 9th digit of b) -------------------------
 A = 6378137.0  #: semi-major axis [m]

@@ -18,11 +18,11 @@ from __future__ import annotations
 
 import numpy as np
 import pandas as pd
-from numba import njit
 
 from .aot import entry
 from .attitude import euler_to_dcm
 from .earth import enu_displacement_to_geodetic, geodetic_to_ecef_nb
+from .jit import njit
 from .outages import in_windows, window_index
 
 

@@ -20,11 +20,11 @@ from __future__ import annotations
 
 import numpy as np
 import pandas as pd
-from numba import njit
 
 from .attitude import wrap_pi
 from .earth import check_latitude, normal_gravity, radii
 from .errors import InvalidValueError
+from .jit import njit
 from .mechanization.strapdown import llf_mid_point
 
 VEL_COLS = ["vel_e", "vel_n", "vel_u"]

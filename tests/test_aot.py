@@ -1,6 +1,7 @@
 """Ahead-of-time kernels (insgnss/aot.py): the argument check that sends a call to an export or
-to numba, the entry wrapper, the source digest, and - with the module built - a first run that
-compiles nothing and gives the JIT path's results byte for byte."""
+to numba, the lazy kernel (insgnss/jit.py), the source digest, and - with the module built - a
+first run that compiles nothing, imports no numba and gives the JIT path's results byte for
+byte."""
 
 import os
 import subprocess
@@ -9,13 +10,24 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from numba import njit
+import numba
 from numba.core import types
 
-from insgnss import aot
+from insgnss import aot, jit
+from insgnss.kernel_manifest import (
+    ArrayArg,
+    OmittedArg,
+    ScalarArg,
+    argument_kinds,
+    argument_types,
+    numba_types,
+    read_only,
+    type_namespace,
+)
 
 ROOT = Path(__file__).resolve().parents[1]
-F8C2 = types.Array(types.float64, 2, "C")
+F8C2 = ArrayArg("float64", 2, "C")
+F8, I8, B, NONE = (ScalarArg(n) for n in ("float64", "int64", "bool", "none"))
 
 
 def check(*sig):
@@ -34,32 +46,46 @@ def test_array_check_takes_exactly_the_exported_type():
     ro = a.copy()
     ro.flags.writeable = False
     assert not c(ro)                          # the export may write into it
-    assert check(F8C2.copy(readonly=True))(ro)  # a read-only export takes both
-    assert check(F8C2.copy(readonly=True))(a)
-    assert check(F8C2.copy(layout="A"))(a[:, ::2])
+    assert check(*read_only((F8C2,)))(ro)     # a read-only export takes both
+    assert check(*read_only((F8C2,)))(a)
+    assert check(ArrayArg("float64", 2, "A"))(a[:, ::2])
 
 
 def test_scalar_checks_follow_numbas_typing():
-    f, i, b, n = check(types.float64), check(types.int64), check(types.boolean), \
-        check(types.none)
+    f, i, b, n = check(F8), check(I8), check(B), check(NONE)
     assert f(1.5) and f(np.float64(1.5))
     assert not f(1) and not f(np.float32(1.5)) and not f(True)
     assert i(3) and i(np.int64(3)) and i(-(2 ** 63))
     assert not i(True) and not i(3.0) and not i(2 ** 63) and not i(np.int32(3))
     assert b(True) and b(np.bool_(False)) and not b(1)
     assert n(None) and not n(0.0)
-    assert check(types.float32) is None   # a type no export takes: the JIT path
-    assert check(types.UniTuple(types.float64, 2)) is None
+    assert check(ScalarArg("float32")) is None   # a type no export takes: the JIT path
+    with pytest.raises(NameError):              # one the descriptions do not know
+        argument_kinds(["UniTuple(float64, 2)"])
 
 
 def test_omitted_trailing_defaults_become_none_arguments():
-    sig = (types.float64, types.Omitted(None), types.Omitted(None))
-    assert aot.export_signature(sig) == ((types.float64, types.none, types.none), (None, None))
-    assert aot.export_signature((types.Omitted(1.0), types.float64)) == (None, None)
-    assert aot.export_signature((types.float64, types.Omitted(2.0))) == (None, None)
+    sig = (F8, OmittedArg(None), OmittedArg(None))
+    assert aot.export_signature(sig) == ((F8, NONE, NONE), (None, None))
+    assert aot.export_signature((OmittedArg(1.0), F8)) == (None, None)
+    assert aot.export_signature((F8, OmittedArg(2.0))) == (None, None)
 
 
-@njit
+def test_argument_kinds_are_numbas_types_of_every_recorded_argument():
+    """The numba-free reading of the manifest's type strings gives numba's own types back
+    (the build compiles them), for every argument the packaged manifest records."""
+    from insgnss.kernel_manifest import load_manifest
+
+    recorded = {a for es in load_manifest()["kernels"].values() for e in es for a in e["args"]}
+    assert len(recorded) > 10
+    ns = type_namespace()
+    for a in sorted(recorded):
+        assert numba_types(argument_kinds([a])) == argument_types([a], ns), a
+    ro = numba_types(read_only(argument_kinds(["Array(float64, 2, 'C', False, aligned=True)"])))
+    assert ro == (types.Array(types.float64, 2, "C", readonly=True),)
+
+
+@jit.njit(cache=False)
 def _twice(x):
     return 2.0 * x
 
@@ -71,21 +97,53 @@ def test_entry_dispatches_by_argument_types_and_numba_sees_the_dispatcher():
         calls.append((x, pad))
         return -1.0
 
-    e = aot.Entry(_twice, [(1, check(types.float64), export, ())])
+    e = jit.Kernel(_twice.py_func)
+    e.exports = ((1, check(F8), export, ()),)
     assert e(3.0) == -1.0 and calls == [(3.0, None)]   # the export
+    assert e.loaded is None                              # no dispatcher made for it
     assert e(3) == 6                                     # an int: the dispatcher
+    assert e.loaded is not None and len(e.signatures) == 1
     assert e(x=3.0) == 6.0                               # keywords: the dispatcher
     assert e.py_func is _twice.py_func and e.__name__ == "_twice"
-    padded = aot.Entry(_twice, [(1, check(types.float64), export, (None,))])
+    padded = jit.Kernel(_twice.py_func)
+    padded.exports = ((1, check(F8), export, (None,)),)
     padded(2.0)
     assert calls[-1] == (2.0, None)
 
-    @njit
+    @numba.njit
     def caller(x):
         return e(x) + 1.0   # compiled code calls the dispatcher, not the export
 
     assert caller(3.0) == 7.0
-    assert aot.entry(_twice) is _twice or isinstance(aot.entry(_twice), aot.Entry)
+    assert isinstance(aot.entry(_twice), jit.Kernel)
+    wrapped = aot.entry(numba.njit(lambda x: x + 1.0))  # a numba dispatcher: a Kernel of it
+    assert isinstance(wrapped, jit.Kernel) and wrapped(1.0) == 2.0
+
+
+def test_kernel_pickles_by_name_and_is_its_dispatcher_for_numba():
+    import pickle
+
+    from insgnss.filter import kalman
+
+    k = kalman._predict
+    assert isinstance(k, jit.Kernel)
+    assert pickle.loads(pickle.dumps(k)) is k
+    assert not hasattr(k, "__array_interface__")  # introspection does not load numba's side
+    assert "insgnss.filter.kalman._predict" in repr(k)
+
+
+def test_a_run_on_exports_imports_no_numba(tmp_path):
+    """With the module built, a run whose kernels are all exported (the bundled demo's job)
+    never imports numba: the 0.2 s of its import and of making the dispatchers are saved."""
+    if not aot.status().startswith("used"):
+        pytest.skip(f"insgnss._aot: {aot.status()}")
+    probe = ("import sys\nfrom insgnss.cli import main\nrc = main(sys.argv[1:])\n"
+             "print('NUMBA', 'numba' in sys.modules)\nsys.exit(rc)\n")
+    (tmp_path / "probe.py").write_text(probe)
+    r = subprocess.run([sys.executable, "probe.py", "demo", "-o", "out", "--no-progress"], cwd=tmp_path, capture_output=True, text=True,
+                       env=dict(os.environ, INSGNSS_COMPILE_AHEAD="0"), timeout=600)
+    assert r.returncode == 0, r.stderr[-3000:]
+    assert "NUMBA False" in r.stdout, r.stdout[-2000:]
 
 
 def test_source_digest_follows_the_sources(tmp_path):
@@ -138,7 +196,7 @@ def test_every_kernel_of_the_manifest_is_exported_and_an_entry():
     for e in aot.entries():
         key = f"{e['module']}.{e['name']}"
         assert key in table, key
-        assert isinstance(getattr(import_module(e["module"]), e["name"]), aot.Entry), key
+        assert getattr(import_module(e["module"]), e["name"]).exports, key
 
 
 def _run(args: list[str], out: Path, env: dict) -> None:

@@ -19,12 +19,13 @@ REPO = Path(__file__).resolve().parents[1]
 #: the filter runs with its progress bar
 PROBE = r'''
 import json, sys
-from numba.core.dispatcher import Dispatcher
+from insgnss.jit import Kernel
 import insgnss.job.processes as P
 
 def compiled():
-    return {f"{n}.{k}": len(v.signatures) for n, m in list(sys.modules.items())
-            if n.startswith("insgnss") for k, v in vars(m).items() if isinstance(v, Dispatcher)}
+    return {f"{n}.{k}": len(v.loaded.signatures) for n, m in list(sys.modules.items())
+            if n.startswith("insgnss") for k, v in vars(m).items()
+            if isinstance(v, Kernel) and v.loaded is not None}
 
 real, seen = P.run_filter, {}
 def wrapped(*a, progress=False, **kw):

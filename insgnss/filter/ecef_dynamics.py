@@ -35,9 +35,9 @@ surface (ENU ``diag(1/(N+h), 1/(M+h))`` turned into w; ``kappa`` as in
 from __future__ import annotations
 
 import numpy as np
-from numba import njit
 
 from ..earth import E2, OMEGA_E, A, gravity_gradient_somigliana, normal_gravity_sc
+from ..jit import njit
 from .models import _sensor_error_terms
 
 

@@ -47,9 +47,9 @@ wrong ephemeris), not a wrong covariance, and is never forced through.
 from __future__ import annotations
 
 import numpy as np
-from numba import njit
 
 from ..aot import entry
+from ..jit import njit
 from ..stats import chi2_ppf
 from .linalg import _innovation_cov, cholesky_into
 

@@ -37,10 +37,10 @@ time and value, and points at ``inputs.imu.spike_policy``.
 from __future__ import annotations
 
 import numpy as np
-from numba import njit
 
 from ..aot import entry
 from ..errors import FilterHealthError
+from ..jit import njit
 from .linalg import cholesky_into
 
 __all__ = ["check_covariance", "is_positive_definite", "RunawayNis", "imu_outlier_note",

@@ -50,10 +50,10 @@ from __future__ import annotations
 import time as _time
 
 import numpy as np
-from numba import njit
 
 from ..aot import entry
 from ..errors import ConfigError, FilterHealthError
+from ..jit import njit
 from ..mechanization.strapdown import STEP_WORK_SHAPE
 from . import gating, health
 from .kernels import _euler_std, apply_feedback_into, interval_step, store_nav

@@ -20,10 +20,10 @@ through it instead (:func:`backend`).
 from __future__ import annotations
 
 import numpy as np
-from numba import njit
 
 from ..aot import entry
 from ..errors import FilterHealthError
+from ..jit import njit
 from .linalg import cholesky_into, tri_solve
 
 __all__ = ["KALMAN_BACKENDS", "backend", "predict", "smoother_record", "update"]

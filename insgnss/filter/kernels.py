@@ -14,11 +14,11 @@ is the share of row ``j`` already consumed.
 from __future__ import annotations
 
 import numpy as np
-from numba import njit
 
 from ..aot import entry
 from ..attitude import euler_to_dcm_nb, rotvec_to_dcm_nb
 from ..earth import gravity_somigliana, normal_gravity_sc, radii
+from ..jit import njit
 from ..mechanization.core import _matmul3
 from ..mechanization.strapdown import STEP_WORK_SHAPE, strapdown_step
 from ..mechanization.wander import wander_step, wander_to_nav

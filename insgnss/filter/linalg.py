@@ -10,7 +10,8 @@ are unrolled and vectorised by LLVM, 2-3 times faster than with bounds read from
 from __future__ import annotations
 
 import numpy as np
-from numba import njit
+
+from ..jit import njit
 
 
 @njit(cache=True)

@@ -41,12 +41,12 @@ from typing import NamedTuple
 
 import numpy as np
 import pandas as pd
-from numba import njit
 
 from ..aot import entry
 from ..attitude import wrap_pi
 from ..earth import GRAVITY_SOMIGLIANA, OMEGA_E, normal_gravity_sc
 from ..errors import InputFormatError, InvalidValueError
+from ..jit import njit
 from .models import ExtraState, StateLayout
 
 

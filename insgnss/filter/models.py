@@ -49,10 +49,10 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
-from numba import njit
 
 from ..earth import E2, OMEGA_E, gravity_gradient_somigliana, radii
 from ..imu import ImuErrorModel, grade
+from ..jit import njit
 
 #: indices of the core blocks
 POS = slice(0, 3)

@@ -84,13 +84,13 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 import pandas as pd
-from numba import njit
 
 from .. import earth
 from ..aot import entry
 from ..earth import OMEGA_E, radii
 from ..errors import ConfigError
 from ..imu import grade
+from ..jit import njit
 from ..mechanization.riss import (
     N_PAR,
     ST_A,

@@ -24,9 +24,9 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from numba import njit
 
 from ..aot import entry
+from ..jit import njit
 
 __all__ = ["EPOCH_GRIDS", "Schedule", "build_schedule", "gap_grid", "snap"]
 

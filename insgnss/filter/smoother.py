@@ -54,10 +54,10 @@ INS is close to linear; in high-rate segments every IMU sample is a node.
 from __future__ import annotations
 
 import numpy as np
-from numba import njit
 
 from ..aot import entry
 from ..columns import STD_COLS  # noqa: F401  (the filter tables' std columns, here as before)
+from ..jit import njit
 from .linalg import _mm, cholesky_into, congruence_t, matvec_t, tri_solve
 
 __all__ = ["mbf_backward", "rts_error_state", "smooth"]

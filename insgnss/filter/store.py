@@ -54,9 +54,9 @@ from __future__ import annotations
 
 import numpy as np
 import pandas as pd
-from numba import njit
 
 from ..aot import entry
+from ..jit import njit
 
 __all__ = ["NodeStore", "InnovationLog", "Table", "dense_rows", "innovation_tables",
            "select_rows", "solution_table"]

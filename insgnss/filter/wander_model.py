@@ -36,12 +36,12 @@ from __future__ import annotations
 
 import numpy as np
 import pandas as pd
-from numba import njit
 
 from .. import earth
 from ..attitude import dcm_to_euler_nb, euler_to_dcm_nb, rotvec_to_dcm_nb
 from ..earth import E2, A, ecef_to_geodetic, geodetic_to_ecef_nb
 from ..errors import ConfigError
+from ..jit import njit
 from ..mechanization.wander import nav_state, wander_state
 from . import kernels
 from .measurements import NominalState

@@ -25,11 +25,11 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
-from numba import njit
 
 from ..attitude import dcm_to_euler, dcm_to_rotvec, euler_to_dcm, rotvec_to_dcm, rotvec_xyz_to_dcm_nb
 from ..earth import check_latitude
 from ..errors import ConfigError
+from ..jit import njit
 
 NAV_COLS = ["lat", "lon", "height", "vel_e", "vel_n", "vel_u", "roll", "pitch", "heading"]
 

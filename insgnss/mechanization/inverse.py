@@ -23,7 +23,6 @@ from __future__ import annotations
 
 import numpy as np
 import pandas as pd
-from numba import njit
 
 from .. import earth
 from ..aot import entry
@@ -31,6 +30,7 @@ from ..attitude import euler_to_dcm
 from ..earth import check_latitude
 from ..errors import ConfigError
 from ..imu import increments_table
+from ..jit import njit
 from .core import FRAME_WANDER, frame_id, inverse_step_increments
 from .strapdown import llf_earth_terms, position_update
 from .wander import inverse_increments_wander

@@ -62,7 +62,6 @@ from dataclasses import dataclass
 
 import numpy as np
 import pandas as pd
-from numba import njit
 
 from .. import earth
 from ..aot import entry
@@ -70,6 +69,7 @@ from ..attitude import dcm_to_euler
 from ..earth import OMEGA_E, normal_gravity_id, radii
 from ..errors import DataGapError, InputFormatError, InvalidValueError
 from ..imu import increments
+from ..jit import njit
 from .strapdown import NAV_COLS, NavState, position_update
 
 #: azimuth update identifiers used by the kernel

@@ -52,7 +52,6 @@ from __future__ import annotations
 
 import numpy as np
 import pandas as pd
-from numba import njit
 
 from .. import attitude, earth
 from ..align import gyrocompass, level
@@ -61,6 +60,7 @@ from ..attitude import dcm_to_euler, euler_to_dcm
 from ..earth import E2, OMEGA_E, A, check_latitude, normal_gravity_sc, radii
 from ..errors import ConfigError
 from ..imu import compensation_matrix, coning_sculling, increments
+from ..jit import njit
 from .core import (  # noqa: F401  (re-exported: the public names of the step live here)
     ATTITUDE_EXACT,
     ATTITUDE_FIRST_ORDER,

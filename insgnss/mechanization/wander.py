@@ -54,10 +54,10 @@ from __future__ import annotations
 
 import numpy as np
 import pandas as pd
-from numba import njit
 
 from ..attitude import Rz, rotvec_xyz_to_dcm_nb
 from ..earth import E2, OMEGA_E, A, check_latitude, enu_to_ecef_dcm, normal_gravity_sc
+from ..jit import njit
 from .core import (
     NAV_COLS,
     STEP_WORK_SHAPE,
