@@ -8,9 +8,9 @@ import subprocess
 import sys
 from pathlib import Path
 
+import numba
 import numpy as np
 import pytest
-import numba
 from numba.core import types
 
 from insgnss import aot, jit
@@ -140,8 +140,9 @@ def test_a_run_on_exports_imports_no_numba(tmp_path):
     probe = ("import sys\nfrom insgnss.cli import main\nrc = main(sys.argv[1:])\n"
              "print('NUMBA', 'numba' in sys.modules)\nsys.exit(rc)\n")
     (tmp_path / "probe.py").write_text(probe)
-    r = subprocess.run([sys.executable, "probe.py", "demo", "-o", "out", "--no-progress"], cwd=tmp_path, capture_output=True, text=True,
-                       env=dict(os.environ, INSGNSS_COMPILE_AHEAD="0"), timeout=600)
+    r = subprocess.run([sys.executable, "probe.py", "demo", "-o", "out", "--no-progress"],
+                       cwd=tmp_path, capture_output=True, text=True, timeout=600,
+                       env=dict(os.environ, INSGNSS_COMPILE_AHEAD="0"))
     assert r.returncode == 0, r.stderr[-3000:]
     assert "NUMBA False" in r.stdout, r.stdout[-2000:]
 
