@@ -112,3 +112,58 @@ def test_smoother_record_stops_on_an_indefinite_innovation_covariance():
     b = kalman.smoother_record(np.asfortranarray(P), np.asfortranarray(H), R, z)
     for u, v in zip(a, b, strict=True):
         np.testing.assert_array_equal(u, v)
+
+
+def test_loop_products_and_inverse_equal_numpys():
+    """The compiled products and inverse the kernels use instead of BLAS / LAPACK
+    (filter/linalg.py) equal numpy's to rounding, propagate a NaN as BLAS does, and stop on an
+    exactly singular matrix as ``np.linalg.inv``."""
+    from insgnss.filter.linalg import inverse, matmul, matmul_bt, matvec
+
+    rng = np.random.default_rng(7)
+    for n, m, p in ((1, 1, 1), (3, 3, 3), (6, 21, 21), (21, 21, 4), (5, 2, 9)):
+        A, B, C = rng.normal(size=(n, m)), rng.normal(size=(m, p)), rng.normal(size=(p, m))
+        x = rng.normal(size=m)
+        np.testing.assert_allclose(matmul(A, B), A @ B, rtol=1e-13, atol=1e-13)
+        np.testing.assert_allclose(matmul_bt(A, C), A @ C.T, rtol=1e-13, atol=1e-13)
+        np.testing.assert_allclose(matvec(A, x), A @ x, rtol=1e-13, atol=1e-13)
+    for n in (1, 2, 6, 21):
+        S = rng.normal(size=(n, n)) + n * np.eye(n)
+        np.testing.assert_allclose(inverse(S) @ S, np.eye(n), atol=1e-12)
+        np.testing.assert_allclose(inverse(S), np.linalg.inv(S), rtol=1e-11, atol=1e-13)
+    # a zero leading pivot: the row exchange of partial pivoting
+    np.testing.assert_allclose(inverse(np.array([[0.0, 2.0], [4.0, 1.0]])),
+                               np.linalg.inv(np.array([[0.0, 2.0], [4.0, 1.0]])), rtol=1e-15)
+    B = np.eye(3)
+    B[1, 1] = np.nan
+    assert np.isnan(matmul(np.zeros((3, 3)), B)[:, 1]).all()  # 0 * NaN as in BLAS
+    with pytest.raises(np.linalg.LinAlgError):
+        inverse(np.array([[1.0, 2.0], [2.0, 4.0]]))
+
+
+def test_the_epoch_kernels_import_no_scipy():
+    """The Kalman steps and the GNSS measurement kernels run without importing scipy.linalg
+    (numba compiles ``@`` and ``np.linalg`` on arrays to BLAS / LAPACK calls through scipy;
+    its import is 0.12-0.15 s of a run)."""
+    import subprocess
+    import sys
+
+    code = """
+import sys
+import numpy as np
+from insgnss.filter import kalman, measurements as M
+n = 21
+x, P, F = np.zeros(n), np.eye(n), np.eye(n)
+kalman.predict(x, P, F, 1e-3 * P)
+H = np.zeros((3, n)); H[0, 0] = H[1, 1] = H[2, 2] = 1.0
+kalman.update(x, P, np.ones(3), np.eye(3), H)
+kalman.smoother_record(P, H, np.eye(3), np.ones(3))
+std, arm, C = np.ones(3), np.array([0.1, 0.2, 0.3]), np.eye(3)
+M._gnss_position(np.array([0.5, 0.1, 10.0]), std, arm, C, 0.5, 0.1, 10.0, 6.4e6, 6.4e6, n)
+M._gnss_velocity(np.zeros(3), std, arm, True, np.ones(3), C, np.ones(3) * 1e-3, 0.5, 10.0,
+                 6.4e6, 6.4e6, n)
+print(sorted(m for m in sys.modules if m.startswith("scipy.linalg")))
+"""
+    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=600)
+    assert r.returncode == 0, r.stderr[-3000:]
+    assert r.stdout.strip() == "[]", r.stdout

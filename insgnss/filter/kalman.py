@@ -4,11 +4,12 @@ The engine propagates ``x, P`` and applies the stacked update of the measurement
 an epoch. Those steps were filterpy's ``predict`` and ``update`` called from Python at every
 epoch; on a car drive (about 5,000 GNSS epochs) their per-call overhead (argument checks,
 reshapes, temporaries), not the arithmetic of a 15-21 state filter, dominated the filter's
-time. The two functions below are the same arithmetic, in the same order, compiled:
+time. The two functions below are the same arithmetic, compiled, with the products as loops
+(:mod:`.linalg`; no BLAS or LAPACK call, whose first use imports ``scipy.linalg``):
 
 - :func:`predict`: ``x = F x``, ``P = F P F^T + Q``;
 - :func:`update`: ``y = z - H x``, ``S = H P H^T + R``, ``K = P H^T S^-1`` (explicit
-  inverse, like filterpy), ``x = x + K y`` and the Joseph form
+  inverse, like filterpy: Gauss-Jordan with partial pivoting), ``x = x + K y`` and the Joseph form
   ``P = (I - K H) P (I - K H)^T + K R K^T``.
 
 They agree with ``filterpy.kalman.predict`` / ``update`` (and ``KalmanFilter``) to rounding
@@ -24,7 +25,7 @@ import numpy as np
 from ..aot import entry
 from ..errors import FilterHealthError
 from ..jit import njit
-from .linalg import cholesky_into, tri_solve
+from .linalg import cholesky_into, inverse, matmul, matmul_bt, matvec, tri_solve
 
 __all__ = ["KALMAN_BACKENDS", "backend", "predict", "smoother_record", "update"]
 
@@ -35,23 +36,24 @@ KALMAN_BACKENDS = ("compiled", "filterpy")
 @entry
 @njit(cache=True)
 def _predict(x, P, F, Q):
-    x1 = F @ x
-    P1 = (F @ P) @ np.ascontiguousarray(F.T) + Q
+    x1 = matvec(F, x)
+    P1 = matmul_bt(matmul(F, P), F)
+    for i in range(P1.shape[0]):
+        for k in range(P1.shape[1]):
+            P1[i, k] += Q[i, k]
     return x1, P1
 
 
 @entry
 @njit(cache=True)
 def _update(x, P, z, R, H):
-    Ht = np.ascontiguousarray(H.T)
-    y = z - H @ x
-    S = (H @ P) @ Ht + R
-    K = (P @ Ht) @ np.linalg.inv(S)
-    x1 = x + K @ y
+    y = z - matvec(H, x)
+    S = matmul_bt(matmul(H, P), H) + R
+    K = matmul(matmul_bt(P, H), inverse(S))
+    x1 = x + matvec(K, y)
     n = x.shape[0]
-    I_KH = np.eye(n) - K @ H
-    P1 = (I_KH @ P) @ np.ascontiguousarray(I_KH.T) \
-        + (K @ R) @ np.ascontiguousarray(K.T)
+    I_KH = np.eye(n) - matmul(K, H)
+    P1 = matmul_bt(matmul(I_KH, P), I_KH) + matmul_bt(matmul(K, R), K)
     return x1, P1
 
 
@@ -104,7 +106,7 @@ def update(x, P, z, R, H):
 @njit(cache=True)
 def _smoother_record(Pp, H, R, z):
     m, n = H.shape
-    S = (H @ Pp) @ np.ascontiguousarray(H.T) + R
+    S = matmul_bt(matmul(H, Pp), H) + R
     L = np.empty((m, m))
     G = np.empty((m, n))
     s = np.empty((m, 1))
@@ -114,7 +116,7 @@ def _smoother_record(Pp, H, R, z):
     tri_solve(L, G, m, G, True)
     tri_solve(L, z.reshape((m, 1)), m, s, False)  # s = L^-T (L^-1 z)
     tri_solve(L, s, m, s, True)
-    return True, Pp @ np.ascontiguousarray(G.T), G, s[:, 0]
+    return True, matmul_bt(Pp, G), G, s[:, 0]
 
 
 def smoother_record(Pp, H, R, z, time: float = float("nan")):

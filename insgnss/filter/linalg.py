@@ -5,7 +5,11 @@ the high-rate path, gating, health checks and the smoother.
 
 Functions with an optional dimension argument take it from a caller that compiled it as a
 constant (``numba.literally``, the high-rate path and the smoother): loops with constant bounds
-are unrolled and vectorised by LLVM, 2-3 times faster than with bounds read from the arrays."""
+are unrolled and vectorised by LLVM, 2-3 times faster than with bounds read from the arrays.
+
+The kernels a run calls use these (and no ``@``, ``np.dot`` or ``np.linalg`` on arrays): numba
+compiles those to BLAS / LAPACK calls through scipy, and the first such call of a run imports
+``scipy.linalg`` (0.12-0.15 s) for products of 3 to 30 rows that loops do as fast."""
 
 from __future__ import annotations
 
@@ -61,6 +65,86 @@ def _mm(A, B, out):
             if a != 0.0:
                 for k in range(p):
                     out[i, k] += a * B[j, k]
+
+
+@njit(cache=True)
+def matmul(A, B):
+    """``A @ B`` (a new array; every term, as BLAS: a NaN or an infinity propagates). The inner
+    loop runs along a row of ``B`` and of the result (1-D contiguous views: it vectorises)."""
+    n, m = A.shape
+    p = B.shape[1]
+    out = np.zeros((n, p))
+    for i in range(n):
+        o = out[i]
+        for j in range(m):
+            a = A[i, j]
+            b = B[j]
+            for k in range(p):
+                o[k] += a * b[k]
+    return out
+
+
+@njit(cache=True)
+def matmul_bt(A, B):
+    """``A @ B.T`` (a new array): ``B`` transposed into a copy first, so that the inner loop
+    runs along rows and vectorises (a dot product per element would be a floating-point
+    reduction, which LLVM keeps in order)."""
+    p, m = B.shape
+    Bt = np.empty((m, p))
+    for j in range(p):
+        for k in range(m):
+            Bt[k, j] = B[j, k]
+    return matmul(A, Bt)
+
+
+@njit(cache=True)
+def matvec(A, x):
+    """``A @ x`` (a new vector)."""
+    n, m = A.shape
+    out = np.empty(n)
+    for i in range(n):
+        v = 0.0
+        for j in range(m):
+            v += A[i, j] * x[j]
+        out[i] = v
+    return out
+
+
+@njit(cache=True)
+def inverse(A):
+    """``A^-1`` by Gauss-Jordan elimination with partial pivoting (LAPACK's ``getrf/getri``
+    pivoting, to rounding); raises ``LinAlgError`` for an exactly singular ``A``, as
+    ``np.linalg.inv``."""
+    n = A.shape[0]
+    W = np.empty((n, n))
+    X = np.zeros((n, n))
+    for i in range(n):
+        X[i, i] = 1.0
+        for k in range(n):
+            W[i, k] = A[i, k]
+    for c in range(n):
+        piv, big = c, abs(W[c, c])
+        for r in range(c + 1, n):
+            if abs(W[r, c]) > big:
+                piv, big = r, abs(W[r, c])
+        if not big > 0.0:
+            raise np.linalg.LinAlgError("Matrix is singular to machine precision.")
+        if piv != c:
+            for k in range(n):
+                W[c, k], W[piv, k] = W[piv, k], W[c, k]
+                X[c, k], X[piv, k] = X[piv, k], X[c, k]
+        d = 1.0 / W[c, c]
+        for k in range(n):
+            W[c, k] *= d
+            X[c, k] *= d
+        for r in range(n):
+            if r != c:
+                f = W[r, c]
+                if f != 0.0:
+                    for k in range(n):
+                        W[r, k] -= f * W[c, k]
+                        X[r, k] -= f * X[c, k]
+    return X
 
 
 @njit(cache=True)

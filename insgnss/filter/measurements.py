@@ -47,6 +47,7 @@ from ..attitude import wrap_pi
 from ..earth import GRAVITY_SOMIGLIANA, OMEGA_E, normal_gravity_sc
 from ..errors import InputFormatError, InvalidValueError
 from ..jit import njit
+from .linalg import matmul, matvec
 from .models import ExtraState, StateLayout
 
 
@@ -386,7 +387,7 @@ def _gnss_position(p, std, lever, C, lat, lon, height, M, N, n):
     a dozen small array operations (their Python overhead was most of the epoch's cost).
     ``z``: ENU offset of the nominal antenna from the fix (:meth:`NominalState.enu_offset`
     plus ``C l``), ``H = [I, 0, -[C l x], 0]``."""
-    la = C @ lever
+    la = matvec(C, lever)
     d = lon - p[1]  # wrap_pi: the longitude difference in (-pi, pi]
     d = -(np.mod(-d + np.pi, 2 * np.pi) - np.pi)
     z = np.empty(3)
@@ -410,16 +411,16 @@ def _gnss_velocity(v, std, lever, use_arm, vel, C, omega_ib, lat, height, M, N, 
     H[0, 3] = H[1, 4] = H[2, 5] = 1.0
     z = vel - v
     if use_arm:
-        u = C @ _cross3(omega_ib, lever)
-        cl = C @ lever
+        u = matvec(C, _cross3(omega_ib, lever))
+        cl = matvec(C, lever)
         w_il = np.array([
             -vel[1] / (M + height),
             OMEGA_E * np.cos(lat) + vel[0] / (N + height),
             OMEGA_E * np.sin(lat) + vel[0] * np.tan(lat) / (N + height),
         ])
         z = z + u - _cross3(w_il, cl)
-        _put3(H, 6, _skew3(w_il) @ _skew3(cl) - _skew3(u), 1.0)
-        _put3(H, 9, C @ _skew3(lever), 1.0)
+        _put3(H, 6, matmul(_skew3(w_il), _skew3(cl)) - _skew3(u), 1.0)
+        _put3(H, 9, matmul(C, _skew3(lever)), 1.0)
     return z, H, np.diag(std ** 2)
 
 
