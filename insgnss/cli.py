@@ -94,9 +94,9 @@ def main(argv: list[str] | None = None) -> int:
 
 
 def entry() -> None:
-    """The console script ``insgnss`` (and ``python -m insgnss.cli``): :func:`main`, then
-    the process ends at once (:func:`exit_now`) instead of through the interpreter's
-    teardown.
+    """The console script ``insgnss`` (and ``python -m insgnss``, ``python -m insgnss.cli``):
+    :func:`main`, then the process ends at once (:func:`exit_now`) instead of through the
+    interpreter's teardown.
 
     The teardown of a long run frees the run's objects one by one: 1.0-1.4 s of a
     1 h / 200 Hz ``process`` run, after every output is written and closed. Code that calls

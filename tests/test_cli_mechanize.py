@@ -91,3 +91,17 @@ def test_mechanize_cli_wander_frame_and_gravity_model(tmp_path):
                             "45", "--lon", "0", "--attitude", "0,0,0", "-o",
                             str(tmp_path / "o.csv"), *bad], capture_output=True, text=True)
         assert r.returncode == 2 and "Traceback" not in r.stderr and bad[1] in r.stderr
+
+
+def test_python_dash_m_insgnss_is_the_command():
+    """``python -m insgnss`` (a venv whose scripts are not on PATH) is the ``insgnss`` command:
+    the same help, and its exit status."""
+    import subprocess
+    import sys
+
+    r = subprocess.run([sys.executable, "-m", "insgnss", "--help"], capture_output=True,
+                       text=True, timeout=300)
+    assert r.returncode == 0 and "process" in r.stdout and "usage: insgnss" in r.stdout, r.stderr
+    bad = subprocess.run([sys.executable, "-m", "insgnss", "process", "no_such_job.toml"],
+                         capture_output=True, text=True, timeout=300)
+    assert bad.returncode == 2 and "no_such_job.toml" in bad.stderr
