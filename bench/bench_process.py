@@ -13,7 +13,9 @@ times real time) and the size of what it wrote. Modes:
   package's cache is not touched); the compile time of each kernel is printed (numba's
   compile events, exclusive of the callees compiled meanwhile, with the number of
   specialisations; the kernels the compile-ahead helper compiled beside it are loaded, not
-  listed: ``INSGNSS_COMPILE_AHEAD=0`` in the environment measures a run without it);
+  listed: ``INSGNSS_COMPILE_AHEAD=0`` in the environment measures a run without it). The
+  listener is registered when a kernel first loads numba, so a run on the ahead-of-time
+  kernels imports no numba here either ("nothing compiled (numba not even imported)");
 - **no report**: one warm run with ``--no-report``.
 
 Data sets:
@@ -118,24 +120,38 @@ CHILD = r"""
 import atexit, importlib, json, os, sys, time
 t0 = time.perf_counter()
 marks = {}
-atexit.register(lambda: open(os.environ["BENCH_MARKS"], "w").write(json.dumps(marks)))
+atexit.register(lambda: open(os.environ["BENCH_MARKS"], "w").write(json.dumps(
+    dict(marks, numba_loaded="numba" in sys.modules))))
 if os.environ.get("BENCH_COMPILE"):  # compile time per kernel (numba's compile events)
-    from numba.core import event as _ev
     _stack, _comp = [], {}
-    class _Compile(_ev.Listener):
-        def on_start(self, e):
-            f = e.data["dispatcher"].py_func
-            _stack.append([f"{f.__module__}.{f.__qualname__}", time.perf_counter(), 0.0])
-        def on_end(self, e):
-            name, start, inner = _stack.pop()
-            dt = time.perf_counter() - start
-            if _stack:
-                _stack[-1][2] += dt
-            c = _comp.setdefault(name, [0.0, 0])
-            c[0] += dt - inner  # exclusive: the callees compiled meanwhile are their own
-            c[1] += 1
-    _ev.register("numba:compile", _Compile())
     marks["compile"] = _comp
+    def _listen():
+        from numba.core import event as _ev
+        class _Compile(_ev.Listener):
+            def on_start(self, e):
+                f = e.data["dispatcher"].py_func
+                _stack.append([f"{f.__module__}.{f.__qualname__}", time.perf_counter(), 0.0])
+            def on_end(self, e):
+                name, start, inner = _stack.pop()
+                dt = time.perf_counter() - start
+                if _stack:
+                    _stack[-1][2] += dt
+                c = _comp.setdefault(name, [0.0, 0])
+                c[0] += dt - inner  # exclusive: the callees compiled meanwhile are their own
+                c[1] += 1
+        _ev.register("numba:compile", _Compile())
+    try:  # registered when a kernel first loads numba (insgnss.jit.register_numba runs
+        import insgnss.jit as _jit  # before any dispatcher is made): a run that compiles
+    except ImportError:             # nothing imports no numba, here as for a user
+        _listen()                   # (a checkout from before insgnss.jit: at once)
+    else:
+        _register = _jit.register_numba
+        def _register_and_listen():
+            first = not _jit._REGISTERED
+            _register()
+            if first:
+                _listen()
+        _jit.register_numba = _register_and_listen
 import insgnss.cli, insgnss.pipeline
 marks["import"] = time.perf_counter() - t0
 
@@ -386,8 +402,12 @@ def print_breakdown(warm: dict) -> None:
 def print_compile(cold: dict, top: int = 15) -> None:
     """Compile time per kernel of the cold run (wall s, exclusive of the callees compiled
     meanwhile; numba's ``numba:compile`` events), largest first; ``xN``: specialisations."""
-    comp = (cold or {}).get("marks", {}).get("compile") or {}
+    marks = (cold or {}).get("marks", {})
+    comp = marks.get("compile") or {}
     if not comp:
+        if cold and "compile" in marks:
+            print(f"\ncompile, {cold['name']} cold: nothing compiled (numba "
+                  f"{'imported' if marks.get('numba_loaded') else 'not even imported'})")
         return
     total = sum(v[0] for v in comp.values())
     print(f"\ncompile, {cold['name']} cold: {total:.1f} s in {len(comp)} functions "
