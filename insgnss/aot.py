@@ -257,29 +257,22 @@ def exports() -> list[tuple[str, object, object]]:
         try:
             disp = getattr(import_module(e["module"]), e["name"])
             disp = getattr(disp, "dispatcher", disp)  # a Kernel: its numba dispatcher
-            sig, args, _ = _export_types(e)
-            if args is None:
+            sig, kinds, _ = _export_types(e)
+            if kinds is None:
                 continue
-            sig, args = numba_types(sig), numba_types(args)
+            sig, args = numba_types(sig), numba_types(kinds)
             disp.compile(sig)
             ret = disp.overloads[sig].signature.return_type
         except Exception:  # noqa: BLE001 (a stale entry: that kernel takes the JIT path)
             continue
         # the kernel typed with every array argument read-only, where it writes none of them
         # (an export that takes a read-only array takes a writable one as well)
-        ro = _read_only_types(args)
+        ro = numba_types(read_only(kinds))
         if ro != args and _types(disp.py_func, ro, ret):
             out.append((f"k{i}r", ret(*ro), disp.py_func))
         elif _types(disp.py_func, args, ret):
             out.append((f"k{i}", ret(*args), disp.py_func))
     return out
-
-
-def _read_only_types(sig: tuple) -> tuple:
-    """numba types ``sig`` with every array type read-only."""
-    from numba.core import types
-
-    return tuple(t.copy(readonly=True) if isinstance(t, types.Array) else t for t in sig)
 
 
 def _types(fn, sig: tuple, ret) -> bool:

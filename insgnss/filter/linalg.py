@@ -53,34 +53,31 @@ def _fill(a, v):
 
 
 @njit(cache=True)
-def _mm(A, B, out):
-    """``out = A @ B`` skipping the zeros of A (out must not alias A or B)."""
+def _mm(A, B, out, skip_zeros=True):
+    """``out = A @ B`` (out must not alias A or B), skipping the zeros of A unless
+    ``skip_zeros`` is False (then every term counts, as in BLAS: a NaN or an infinity of B
+    propagates). The inner loop runs along a row of ``B`` and of ``out`` (1-D views: it
+    vectorises); each element is summed in the order of ``j`` either way."""
     n, m = A.shape
     p = B.shape[1]
     for i in range(n):
+        o = out[i]
         for k in range(p):
-            out[i, k] = 0.0
+            o[k] = 0.0
         for j in range(m):
             a = A[i, j]
-            if a != 0.0:
-                for k in range(p):
-                    out[i, k] += a * B[j, k]
+            if skip_zeros and a == 0.0:
+                continue
+            b = B[j]
+            for k in range(p):
+                o[k] += a * b[k]
 
 
 @njit(cache=True)
 def matmul(A, B):
-    """``A @ B`` (a new array; every term, as BLAS: a NaN or an infinity propagates). The inner
-    loop runs along a row of ``B`` and of the result (1-D contiguous views: it vectorises)."""
-    n, m = A.shape
-    p = B.shape[1]
-    out = np.zeros((n, p))
-    for i in range(n):
-        o = out[i]
-        for j in range(m):
-            a = A[i, j]
-            b = B[j]
-            for k in range(p):
-                o[k] += a * b[k]
+    """``A @ B`` (a new array; every term, as BLAS: :func:`_mm` without skipping zeros)."""
+    out = np.empty((A.shape[0], B.shape[1]))
+    _mm(A, B, out, False)
     return out
 
 
