@@ -141,6 +141,86 @@ def test_loop_products_and_inverse_equal_numpys():
         inverse(np.array([[1.0, 2.0], [2.0, 4.0]]))
 
 
+def _sparse_case(rng, n, m):
+    """A transition matrix and measurement rows shaped like the strapdown model's: a dense
+    navigation block, couplings to a few bias states, identity elsewhere; H sees position
+    and attitude (a GNSS fix with a lever arm)."""
+    F = np.eye(n)
+    F[:9, :9] += 0.01 * rng.normal(size=(9, 9))
+    F[3:9, 9:15] += 0.01 * rng.normal(size=(6, 6))
+    F[9, 9] = 0.0  # a zero on the diagonal too
+    H = np.zeros((m, n))
+    H[:, :3] = rng.normal(size=(m, 3))
+    H[:, 6:9] = rng.normal(size=(m, 3))
+    return F, H
+
+
+@pytest.mark.parametrize("n,m", [(15, 3), (21, 2), (25, 3)])
+def test_sparse_products_are_the_dense_ones_bit_for_bit(n, m):
+    """Skipping the zeros of the sparse factor and forming the congruences transposed
+    (filter/linalg.py ``congruence_transposed``) leaves every element the same sum in the
+    same order: predict and update return exactly what the dense loop products followed by
+    ``0.5 (P + P^T)`` gave (the engine's form before), and an exactly symmetric P."""
+    from insgnss.filter.linalg import congruence_transposed, inverse, matmul, matmul_bt, matvec
+
+    rng = np.random.default_rng(10 * n + m)
+    for _ in range(10):
+        x, P, _, Q, z, R, _ = _case(rng, n, m)
+        F, H = _sparse_case(rng, n, m)
+        np.testing.assert_array_equal(congruence_transposed(F, P),
+                                      matmul_bt(matmul(F, P), F).T)
+        # predict: the dense products, then numpy's symmetrization
+        X = matmul_bt(matmul(F, P), F) + Q
+        xp, Pp = kalman.predict(x, P, F, Q)
+        np.testing.assert_array_equal(xp, matvec(F, x))
+        np.testing.assert_array_equal(Pp, 0.5 * (X + X.T))
+        assert (Pp == Pp.T).all()
+        # update: Joseph form from the same dense products
+        y = z - matvec(H, xp)
+        S = matmul_bt(matmul(H, Pp), H) + R
+        K = matmul(matmul_bt(Pp, H), inverse(S))
+        I_KH = np.eye(n) - matmul(K, H)
+        X = matmul_bt(matmul(I_KH, Pp), I_KH) + matmul_bt(matmul(K, R), K)
+        xu, Pu = kalman.update(xp, Pp, z, R, H)
+        np.testing.assert_array_equal(xu, xp + matvec(K, y))
+        np.testing.assert_array_equal(Pu, 0.5 * (X + X.T))
+        assert (Pu == Pu.T).all()
+
+
+def test_covariance_fault_and_the_innovation_kernel():
+    """The compiled health check (finite, positive definite) and the gate's ``S``, NIS."""
+    from insgnss.filter import gating, health
+
+    rng = np.random.default_rng(3)
+    x, P, _, _, z, R, H = _case(rng, 15, 3)
+    assert health.covariance_fault(x, P, True) == 0
+    bad = P.copy()
+    bad[4, 7] = np.inf
+    assert health.covariance_fault(x, bad, False) == 1
+    xn = x.copy()
+    xn[2] = np.nan
+    assert health.covariance_fault(xn, P, False) == 1
+    indefinite = P.copy()
+    indefinite[0, 0] = -1.0
+    assert health.covariance_fault(x, indefinite, False) == 0  # finite; no Cholesky asked
+    assert health.covariance_fault(x, indefinite, True) == 2
+    with pytest.raises(FilterHealthError, match="not positive definite at t = 2.500000"):
+        health.check_covariance(x, indefinite, 2.5, "update")
+    with pytest.raises(FilterHealthError, match="non-finite at t = 1.000000"):
+        health.check_covariance(x, bad, 1.0, "prediction", full=False)
+    assert health.finite_navigation(np.ones(3), np.ones(3), np.eye(3))
+    C = np.eye(3)
+    C[2, 1] = np.nan
+    assert not health.finite_navigation(np.ones(3), np.ones(3), C)
+    S, nis = gating.innovation_nis(H, P, R, z)
+    S_ref = H @ P @ H.T + R
+    np.testing.assert_allclose(S, S_ref, rtol=1e-13)
+    assert (S == S.T).all()
+    assert nis == pytest.approx(z @ np.linalg.solve(S_ref, z), rel=1e-12)
+    _, nis = gating.innovation_nis(H, P, -10.0 * R - S_ref, z)
+    assert np.isnan(nis)  # S not positive definite
+
+
 def test_the_epoch_kernels_import_no_scipy():
     """The Kalman steps and the GNSS measurement kernels run without importing scipy.linalg
     (numba compiles ``@`` and ``np.linalg`` on arrays to BLAS / LAPACK calls through scipy;

@@ -57,7 +57,7 @@ from . import gating, health, highrate
 from .gating import GateTable
 from .heading_reinit import HeadingMonitor, HeadingReinit, reset_covariance
 from .health import RunawayNis, check_covariance
-from .kalman import KALMAN_BACKENDS, smoother_record
+from .kalman import KALMAN_BACKENDS, as_f64, smoother_record
 from .kalman import backend as kalman_backend
 from .measurements import Measurement
 from .models import BIAS_MODELS, ERROR_DYNAMICS, StateLayout
@@ -422,6 +422,8 @@ class _Run:
         self.check = bool(config.check_health)
         # Kalman predict/update of the general epochs: compiled (kalman.py) or filterpy's
         self.kf_predict, self.kf_update = kalman_backend(config.kalman)
+        # the compiled ones return P symmetrized; filterpy's P is symmetrized here
+        self.symmetrize = config.kalman != "compiled"
         self.timing = {"updates": 0.0}
         t = model.t
         tol = min(config.snap_tolerance, 1e-3 * float(np.median(np.diff(t))))
@@ -493,7 +495,8 @@ def _propagate(run: _Run, e: int, node: int, x, P):
             run.xn_i += 1
     c0 = _time.perf_counter()
     x, P = run.kf_predict(x, P, Phi, Qd)
-    P = 0.5 * (P + P.T)
+    if run.symmetrize:
+        P = 0.5 * (P + P.T)
     if run.check:
         if not model.nominal_finite():
             raise health.nominal_error(te)
@@ -534,8 +537,7 @@ def _gate(run: _Run, m, info, time: float, z, H, R, P, label: str = ""):
     accepted for longer than the recovery time (:mod:`.gating`, "Labelled rows"). ``info``:
     the model's entry of ``run.ginfo``."""
     tid, prob, recoverable = info[0], info[1], info[2]
-    S = H @ P @ H.T + R
-    nis = gating.nis(S, z)
+    S, nis = gating.innovation_nis(as_f64(H), as_f64(P), as_f64(R), as_f64(z))
     nn = nis / z.size
     run.runaway.push(tid, m.name, time, nn)
     if recoverable and not nn <= run.abs_nis:
@@ -599,7 +601,8 @@ def _update(run: _Run, e: int, x, P):
             R[i0:i1, i0:i1] = Rk
             i0 = i1
     x, P = run.kf_update(x, P, z, R, H)
-    P = 0.5 * (P + P.T)
+    if run.symmetrize:
+        P = 0.5 * (P + P.T)
     if run.check:
         check_covariance(x, P, sched.epochs[e], "update")
     if run.config.smoother:

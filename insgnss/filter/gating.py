@@ -53,8 +53,8 @@ from ..jit import njit
 from ..stats import chi2_ppf
 from .linalg import _innovation_cov, cholesky_into
 
-__all__ = ["GateTable", "gate_step", "inflate_for", "nis", "nis3", "nis_into", "type_lost", "ACCEPT",
-           "REJECT", "RECOVER"]
+__all__ = ["GateTable", "gate_step", "inflate_for", "innovation_nis", "nis", "nis3", "nis_into",
+           "type_lost", "ACCEPT", "REJECT", "RECOVER"]
 
 REJECT, ACCEPT, RECOVER = 0, 1, 2
 
@@ -137,6 +137,19 @@ def nis(S, y):
     """Normalised innovation squared ``y^T S^-1 y`` by Cholesky; NaN if S is not PD."""
     m = y.shape[0]
     return nis_into(S, y, np.empty((m, m)), np.empty(m))
+
+
+@entry
+@njit(cache=True)
+def innovation_nis(H, P, R, z):
+    """``(S, NIS)`` of one measurement: ``S = H P H^T + R`` (symmetric, skipping the zeros of
+    ``H``; :func:`.linalg._innovation_cov`, as the high-rate path forms it) and
+    ``z^T S^-1 z`` (NaN if ``S`` is not positive definite), in one compiled call."""
+    m, n = H.shape
+    HP = np.empty((m, n))
+    S = np.empty((m, m))
+    _innovation_cov(H, P, R, m, HP, S)
+    return S, nis_into(S, z, np.empty((m, m)), np.empty(m))
 
 
 @entry

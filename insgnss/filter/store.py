@@ -231,18 +231,22 @@ class InnovationLog:
         if not self._rows:
             return
         rows = self._rows
-        m = max(r[2] for r in rows)
+        dof = np.array([r[2] for r in rows], np.int64)
+        m = int(dof.max())
         innov = np.full((len(rows), m), np.nan)
         std = np.full((len(rows), m), np.nan)
-        for i, r in enumerate(rows):
-            d = r[2]
-            innov[i, :d] = r[7]
-            dg = np.diag(r[8])
-            std[i, :d] = np.where(dg >= 0, np.sqrt(np.abs(dg)), np.nan)
+        for d in np.unique(dof).tolist():  # the rows of each size at once
+            if d == 0:
+                continue
+            idx = np.flatnonzero(dof == d)
+            innov[idx, :d] = np.array([rows[i][7] for i in idx.tolist()], float).reshape(-1, d)
+            S = np.array([rows[i][8] for i in idx.tolist()], float).reshape(-1, d, d)
+            dg = np.diagonal(S, axis1=1, axis2=2)
+            std[idx, :d] = np.where(dg >= 0, np.sqrt(np.abs(dg)), np.nan)
         self._chunks.append({
             "time": np.array([r[0] for r in rows], float),
             "tid": np.array([r[1] for r in rows], np.int64),
-            "dof": np.array([r[2] for r in rows], np.int64),
+            "dof": dof,
             "nis": np.array([r[3] for r in rows], float),
             "threshold": np.array([r[4] for r in rows], float),
             "accepted": np.array([r[5] for r in rows], bool),

@@ -39,6 +39,7 @@ from ..imu import coning_sculling, grade, increments
 from ..io import spill
 from ..mechanization.strapdown import NAV_COLS, STEP_WORK_SHAPE, NavState, attitude_update_id
 from . import kernels
+from .health import finite_navigation
 from .measurements import NominalState
 from .models import ERROR_DYNAMICS, StateLayout, process_model
 from .process import ProcessModelBase
@@ -245,7 +246,7 @@ class StrapdownModel(ProcessModelBase):
         self._nav_time = None
 
     def nominal_finite(self) -> bool:
-        return bool(np.isfinite(self.pos.sum() + self.vel.sum() + self.C.sum()))
+        return finite_navigation(self.pos, self.vel, self.C)
 
     def nominal(self, time: float) -> NominalState:
         nav = self._nav
