@@ -105,6 +105,11 @@ def test_runaway_restart_empties_the_windows():
     rw.push(0, "gnss_pos", 3.0, 100.0)
     with pytest.raises(FilterHealthError, match="runaway NIS"):
         rw.push(0, "gnss_pos", 4.0, 100.0)  # stays high after the restart: stopped
+    from insgnss import aot
+    from insgnss.filter import health
+
+    if aot.status().startswith("used"):  # a gate recovery in a run needs no numba either
+        assert health.runaway_restart.exports
 
 
 def test_runaway_count_is_of_epochs_not_rows():

@@ -176,6 +176,7 @@ def runaway_push(buf_t, buf_v, state, tid, time, nnis, window, min_count, bound,
     return -1.0
 
 
+@entry  # called from Python too (a gate recovery): an export, not numba's import
 @njit(cache=True)
 def runaway_restart(state):
     """Empty the runaway-NIS windows of all types (after a gate recovery; module docstring)."""
