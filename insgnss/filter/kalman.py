@@ -33,7 +33,18 @@ import numpy as np
 from ..aot import entry
 from ..errors import FilterHealthError
 from ..jit import njit
-from .linalg import _mm, cholesky_into, congruence_transposed, inverse, matmul, matmul_bt, matvec, tri_solve
+from .linalg import (
+    _mm,
+    cholesky_into,
+    congruence_transposed,
+    inverse,
+    matmul,
+    matmul_bt,
+    matvec,
+    symmetrized_transposed_sum,
+    transpose,
+    tri_solve,
+)
 
 __all__ = ["KALMAN_BACKENDS", "as_f64", "backend", "predict", "smoother_record", "update"]
 
@@ -46,15 +57,8 @@ KALMAN_BACKENDS = ("compiled", "filterpy")
 def _predict(x, P, F, Q):
     x1 = matvec(F, x)
     Y = congruence_transposed(F, P)  # (F P F^T)^T, skipping the zeros of F
-    n = Y.shape[0]
-    P1 = np.empty((n, n))
-    # X = F P F^T + Q has X[i, j] = Y[j, i] + Q[i, j]; P1 = (X + X^T) / 2 as numpy forms it
-    for i in range(n):
-        for j in range(i, n):
-            v = 0.5 * ((Y[j, i] + Q[i, j]) + (Y[i, j] + Q[j, i]))
-            P1[i, j] = v
-            P1[j, i] = v
-    return x1, P1
+    # F P F^T + Q = (Y + Q^T)^T, symmetrized as numpy forms it
+    return x1, symmetrized_transposed_sum(Y, transpose(Q))
 
 
 @entry
@@ -70,14 +74,7 @@ def _update(x, P, z, R, H):
     I_KH = np.eye(n) - matmul(K, H)
     Y = congruence_transposed(I_KH, P)  # ((I - K H) P (I - K H)^T)^T: I - K H is sparse
     W = matmul_bt(K, matmul(K, R))  # (K R K^T)^T
-    P1 = np.empty((n, n))
-    # X = (I - K H) P (I - K H)^T + K R K^T has X[i, j] = Y[j, i] + W[j, i]; P1 = (X + X^T) / 2
-    for i in range(n):
-        for j in range(i, n):
-            v = 0.5 * ((Y[j, i] + W[j, i]) + (Y[i, j] + W[i, j]))
-            P1[i, j] = v
-            P1[j, i] = v
-    return x1, P1
+    return x1, symmetrized_transposed_sum(Y, W)
 
 
 _F64 = np.dtype(np.float64)

@@ -117,6 +117,21 @@ def congruence_transposed(A, P):
 
 
 @njit(cache=True)
+def symmetrized_transposed_sum(Y, W):
+    """``(X + X^T) / 2`` of ``X = (Y + W)^T`` (a new array), each element as numpy's
+    ``0.5 * (X + X.T)`` forms it from ``X``: exactly symmetric. For the congruences of
+    :func:`congruence_transposed` (``Y``) plus a transposed term."""
+    n = Y.shape[0]
+    out = np.empty((n, n))
+    for i in range(n):
+        for j in range(i, n):
+            v = 0.5 * ((Y[j, i] + W[j, i]) + (Y[i, j] + W[i, j]))
+            out[i, j] = v
+            out[j, i] = v
+    return out
+
+
+@njit(cache=True)
 def matvec(A, x):
     """``A @ x`` (a new vector)."""
     n, m = A.shape
