@@ -43,19 +43,11 @@ from ..errors import FilterHealthError
 from ..jit import njit
 from .linalg import cholesky_into
 
-__all__ = ["check_covariance", "covariance_fault", "finite_navigation", "is_positive_definite",
-           "RunawayNis", "imu_outlier_note", "with_imu_note"]
+__all__ = ["check_covariance", "covariance_fault", "finite_navigation", "RunawayNis",
+           "imu_outlier_note", "with_imu_note"]
 
 #: an IMU sample this many times the recording's 99.9th percentile is named as an outlier
 OUTLIER_FACTOR = 5.0
-
-
-@entry
-@njit(cache=True)
-def is_positive_definite(P):
-    """True if the symmetric matrix P has a Cholesky factorisation (all pivots > 0)."""
-    n = P.shape[0]
-    return cholesky_into(P, np.empty((n, n)), n)
 
 
 @entry

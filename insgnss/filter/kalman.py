@@ -34,9 +34,9 @@ from ..aot import entry
 from ..errors import FilterHealthError
 from ..jit import njit
 from .linalg import (
-    _mm,
     cholesky_into,
     congruence_transposed,
+    innovation_covariance,
     inverse,
     matmul,
     matmul_bt,
@@ -64,11 +64,9 @@ def _predict(x, P, F, Q):
 @entry
 @njit(cache=True)
 def _update(x, P, z, R, H):
-    m, n = H.shape
-    HP = np.empty((m, n))
-    _mm(H, P, HP)  # skipping the zeros of H
+    n = x.shape[0]
     y = z - matvec(H, x)
-    S = matmul_bt(HP, H) + R
+    S = innovation_covariance(H, P, R)
     K = matmul(matmul_bt(P, H), inverse(S))
     x1 = x + matvec(K, y)
     I_KH = np.eye(n) - matmul(K, H)
@@ -126,9 +124,7 @@ def update(x, P, z, R, H):
 @njit(cache=True)
 def _smoother_record(Pp, H, R, z):
     m, n = H.shape
-    HP = np.empty((m, n))
-    _mm(H, Pp, HP)  # skipping the zeros of H
-    S = matmul_bt(HP, H) + R
+    S = innovation_covariance(H, Pp, R)
     L = np.empty((m, m))
     G = np.empty((m, n))
     s = np.empty((m, 1))

@@ -117,6 +117,18 @@ def congruence_transposed(A, P):
 
 
 @njit(cache=True)
+def innovation_covariance(H, P, R):
+    """``S = H P H^T + R`` (a new array) as ``matmul_bt(matmul(H, P), H) + R`` forms it, ``H P``
+    skipping the zeros of ``H`` (the same sums): the Kalman update's and the smoother record's
+    ``S``. The gate and the high-rate path form the exactly symmetric one
+    (:func:`_innovation_cov`)."""
+    m, n = H.shape
+    HP = np.empty((m, n))
+    _mm(H, P, HP)
+    return matmul_bt(HP, H) + R
+
+
+@njit(cache=True)
 def symmetrized_transposed_sum(Y, W):
     """``(X + X^T) / 2`` of ``X = (Y + W)^T`` (a new array), each element as numpy's
     ``0.5 * (X + X.T)`` forms it from ``X``: exactly symmetric. For the congruences of
