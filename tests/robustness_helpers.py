@@ -8,6 +8,16 @@ from pathlib import Path
 
 from insgnss.config import Job, load_job_dict
 
+#: first lines of a child's script in the interrupt tests: SIGINT as a shell gives it to a
+#: command (Python's KeyboardInterrupt, not blocked). A test runner's worker may run with SIGINT
+#: blocked or ignored (a library's thread or helper process), and a child inherits both; a
+#: Ctrl-C test then sees a run that never received its Ctrl-C
+SHELL_SIGINT = """
+import signal
+signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT})
+signal.signal(signal.SIGINT, signal.default_int_handler)
+"""
+
 SMALL_JOB_TOML = """
 [scenario]
 name = "small_car"

@@ -14,8 +14,9 @@ import time
 from pathlib import Path
 
 import pytest
+from robustness_helpers import SHELL_SIGINT
 
-SLOW_CHILD = r"""
+SLOW_CHILD = SHELL_SIGINT + r"""
 import sys, time
 from insgnss.io.native import atomic_write
 

@@ -15,13 +15,13 @@ import warnings
 from pathlib import Path
 
 import pytest
-from robustness_helpers import small_job_text
+from robustness_helpers import SHELL_SIGINT, small_job_text
 
 from insgnss.config import load_job
 from insgnss.io.outputset import LOCK_NAME, MARKER, STAGING_PREFIX, OutputSet
 from insgnss.pipeline import run_job, write_outputs
 
-CHILD = r"""
+CHILD = SHELL_SIGINT + r"""
 import os, sys, time
 import insgnss.io.native as native
 mode = sys.argv[1]
