@@ -88,6 +88,20 @@ def _position_errors_nb(ts, slat, slon, sh, tr, rlat, rlon, rh, jr, max_gap):
     return out
 
 
+def enu_errors(solution: pd.DataFrame, reference: pd.DataFrame, *,
+               max_gap: float = 0.5) -> np.ndarray:
+    """ENU position error (solution - reference) [m] at the reference epochs, (N, 3): the array
+    of :func:`position_errors`."""
+    ts = solution.index.to_numpy(float)
+    tr = reference.index.to_numpy(float)
+    if not ts.size:
+        return np.full((tr.size, 3), np.nan)
+    sol = [np.ascontiguousarray(solution[c].to_numpy(float)) for c in ("lat", "lon", "height")]
+    ref = [np.ascontiguousarray(reference[c].to_numpy(float)) for c in ("lat", "lon", "height")]
+    j = np.searchsorted(ts, tr, side="right")
+    return _position_errors_nb(ts, *sol, tr, *ref, j, float(max_gap))
+
+
 def position_errors(solution: pd.DataFrame, reference: pd.DataFrame, *,
                     max_gap: float = 0.5) -> pd.DataFrame:
     """ENU position error (solution - reference) [m] at the reference epochs.
@@ -95,17 +109,9 @@ def position_errors(solution: pd.DataFrame, reference: pd.DataFrame, *,
     Returns a DataFrame indexed by the reference times with ``east north up horizontal``;
     epochs not covered by the solution (outside its span or across a gap) are NaN.
     """
-    ts = solution.index.to_numpy(float)
-    tr = reference.index.to_numpy(float)
-    sol = [np.ascontiguousarray(solution[c].to_numpy(float)) for c in ("lat", "lon", "height")]
-    ref = [np.ascontiguousarray(reference[c].to_numpy(float)) for c in ("lat", "lon", "height")]
-    if not ts.size:
-        enu = np.full((tr.size, 3), np.nan)
-    else:
-        j = np.searchsorted(ts, tr, side="right")
-        enu = _position_errors_nb(ts, *sol, tr, *ref, j, float(max_gap))
+    enu = enu_errors(solution, reference, max_gap=max_gap)
     out = pd.DataFrame(enu, index=reference.index, columns=["east", "north", "up"], copy=False)
-    out["horizontal"] = np.hypot(out["east"], out["north"])
+    out["horizontal"] = np.hypot(enu[:, 0], enu[:, 1])
     return out
 
 

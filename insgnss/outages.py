@@ -80,7 +80,9 @@ def window_index(t, windows) -> np.ndarray:
     """Index of the window containing each time, -1 outside all windows (overlapping windows:
     the last one listed wins)."""
     t = np.asarray(t, dtype=float)
-    d = _disjoint(windows) if len(windows) else None
+    if not len(windows):
+        return np.full(t.shape, -1, dtype=int)
+    d = _disjoint(windows)
     if d is not None:  # O((N + W) log W) for any number of windows, block by block
         idx = np.full(t.shape, -1, dtype=int)
         out = idx.reshape(-1)
@@ -89,8 +91,6 @@ def window_index(t, windows) -> np.ndarray:
         return idx
     t_us = _us(t)
     idx = np.full(t_us.shape, -1, dtype=int)
-    if not len(windows):
-        return idx
     for k, (a, b) in enumerate(windows):
         idx[(t_us >= int(_us(a))) & (t_us < int(_us(b)))] = k
     return idx

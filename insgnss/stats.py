@@ -27,6 +27,7 @@ Wilson-Hilferty alone is not used: at ``p = 0.9999`` with 1 dof it is 7 % off. E
 
 from __future__ import annotations
 
+import functools
 import math
 
 import numpy as np
@@ -224,6 +225,20 @@ def chi2_ppf(p, dof):
         ``x`` with ``P(X <= x) = p``; ``inf`` at ``p = 1``, NaN outside the domain.
     """
     p, k = np.broadcast_arrays(np.asarray(p, float), np.asarray(dof, float))
+    if p.size == 1:  # a gate or a bound: the same few (p, dof) over and over
+        x = _chi2_ppf_one(float(p.flat[0]), float(k.flat[0]))
+        return x if p.ndim == 0 else np.full(p.shape, x)
+    return _chi2_ppf(p, k)
+
+
+@functools.lru_cache(maxsize=1024)
+def _chi2_ppf_one(p: float, k: float) -> float:
+    """:func:`chi2_ppf` of one ``(p, dof)``, remembered (a solve costs about 1 ms)."""
+    return float(_chi2_ppf(np.array([p]), np.array([k]))[0])
+
+
+def _chi2_ppf(p: np.ndarray, k: np.ndarray) -> np.ndarray:
+    """:func:`chi2_ppf` of broadcast arrays."""
     shape = p.shape
     p, k = p.ravel(), k.ravel()
     x = np.full(p.shape, np.nan)
@@ -236,8 +251,7 @@ def chi2_ppf(p, dof):
     rest = inner & ~two
     if np.any(rest):
         x[rest] = 2.0 * _gamma_p_inverse(0.5 * k[rest], p[rest])
-    x = x.reshape(shape)
-    return float(x) if x.ndim == 0 else x
+    return x.reshape(shape)
 
 
 def chi2_cdf(x, dof):

@@ -131,8 +131,8 @@ def test_outputs_and_logs(case):
 
 def test_forward_only_run_keeps_innovations_and_forward(case):
     """A forward-only run (``smoother=False``, the self-tuning's): the same innovations,
-    forward table and feedback as a run with the smoother, no record of the updates (only the
-    smoother reads it); a run that destroys P still stops."""
+    forward table and feedback as a run with the smoother, no record of the updates and no
+    transitions (only the smoother reads them); a run that destroys P still stops."""
     truth, imu, gnss, init = case
     models = [GnssPosition(gnss), GnssVelocity(gnss)]
     full = run_filter(imu, init, models, FilterConfig(imu_model="tactical"))
@@ -140,6 +140,10 @@ def test_forward_only_run_keeps_innovations_and_forward(case):
     pd.testing.assert_frame_equal(fwd.innovations, full.innovations)
     pd.testing.assert_frame_equal(fwd.forward, full.forward)
     assert np.array_equal(fwd.feedback, full.feedback) and np.abs(fwd.feedback).sum() > 0
+    # nor the transitions (the smoother reads them alone): the same covariances without them
+    assert fwd.Phi is None and full.Phi.shape == full.P_filtered.shape
+    assert np.array_equal(fwd.P_filtered, full.P_filtered)
+    assert np.array_equal(fwd.P_predicted, full.P_predicted)
     assert full.updates["s"].shape[0] == 6 * len(gnss)
     assert full.updates["H_ptr"].shape[0] == 6 * len(gnss) + 1
     # H kept by its non-zeros: the dense rows hold exactly the stored entries, none zero

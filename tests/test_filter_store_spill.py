@@ -114,6 +114,10 @@ def test_release_gives_back_the_pages_and_keeps_the_contents(tmp_path):
     release(np.ones((10, 3)))  # in memory: nothing happens
     assert list(blocks(10, 8, 24)) == [(0, 3), (3, 6), (6, 9), (9, 10)]
     assert list(blocks(0, 8)) == []
+    # the blocks holding rows start .. stop-1 only, with the bounds of all of them
+    assert list(blocks(10, 8, 24, start=4, stop=7)) == [(3, 6), (6, 9)]
+    assert list(blocks(10, 8, 24, start=9, stop=50)) == [(9, 10)]
+    assert list(blocks(10, 8, 24, start=5, stop=5)) == []
 
 
 def test_table_take_reads_rows_and_columns_in_blocks(tmp_path, monkeypatch):
@@ -132,6 +136,13 @@ def test_table_take_reads_rows_and_columns_in_blocks(tmp_path, monkeypatch):
     np.testing.assert_array_equal(part.index.to_numpy(), rows * 0.01)
     pd.testing.assert_frame_equal(tab.take(), tab.frame(), check_exact=True)
     assert len(tab) == 1000
+    # a few rows of a long table visit (and give back) the blocks they lie in, not every one
+    seen = []
+    monkeypatch.setattr(spill, "release", lambda a, i=0, j=None: seen.append((i, j)))
+    np.testing.assert_array_equal(tab.take(np.arange(500, 520), ["a"]).to_numpy()[:, 0],
+                                  v[500:520, 0])
+    assert 1 <= len(seen) <= 2 and seen[0][0] <= 500 and seen[-1][1] >= 520
+    assert tab.take(np.array([], np.int64)).shape == (0, 4)
 
 
 @pytest.mark.parametrize("high_rate", [False, True])
@@ -159,6 +170,8 @@ def test_smoothed_table_formed_at_the_rows_read_is_the_whole_table(monkeypatch, 
     rows = np.unique(np.concatenate([np.arange(0, n, 37), np.arange(500, 700), [n - 1]]))
     cols = [tab.columns[k] for k in (0, 2, 5, 9, len(tab.columns) - 1)]
     part = tab.take(rows, cols)
+    position_parts = [(pos, tab.take(rows, pos)) for pos in (
+        ["lat", "lon", "height", "east_std", "north_std", "up_std"], ["lon", "up_std"])]
     whole_rows = tab.take()
     assert tab._values is None  # nothing above formed the whole table
     whole = tab.values  # the whole table at once (what a DataFrame of it holds)
@@ -166,6 +179,11 @@ def test_smoothed_table_formed_at_the_rows_read_is_the_whole_table(monkeypatch, 
     np.testing.assert_array_equal(part.to_numpy(), whole[np.ix_(rows, [tab.columns.index(c)
                                                                       for c in cols])])
     np.testing.assert_array_equal(part.index.to_numpy(), tab.time[rows])
+    # the evaluation's columns alone (the assembly forms only those): the same values
+    for pos, got in position_parts:
+        assert list(got.columns) == pos
+        np.testing.assert_array_equal(got.to_numpy(), whole[np.ix_(rows, [tab.columns.index(c)
+                                                                         for c in pos])])
     pd.testing.assert_frame_equal(res.smoothed, tab.take(), check_exact=True)
     assert np.isfinite(whole[:, :9]).all() and not np.array_equal(whole[:, :9],
                                                                    res.forward_array[:, :9])

@@ -93,3 +93,21 @@ def test_scalar_series_and_fraction_are_the_vector_ones_bit_for_bit():
     k = rng.uniform(0.3, 30000.0, 40)
     np.testing.assert_array_equal(stats.chi2_ppf(0.9999, k),
                                   [stats.chi2_ppf(0.9999, v) for v in k])
+
+
+def test_one_quantile_is_remembered_with_its_shape():
+    """A single ``(p, dof)`` (a gate, a NIS bound of a figure) is solved once: the same value
+    again, as a float for scalars and in the given shape for one-element arrays."""
+    from insgnss import stats
+
+    stats._chi2_ppf_one.cache_clear()
+    first = chi2_ppf(0.995, 37)
+    assert isinstance(first, float) and first == pytest.approx(stats_ref(0.995, 37), rel=1e-12)
+    again = chi2_ppf(np.array([[0.995]]), np.array([37.0]))
+    assert again.shape == (1, 1) and again[0, 0] == first
+    assert stats._chi2_ppf_one.cache_info().hits == 1
+    assert np.isnan(chi2_ppf(np.nan, 3)) and np.isnan(chi2_ppf(0.5, np.nan))
+
+
+def stats_ref(p, dof):
+    return float(stats.chi2.ppf(p, dof))

@@ -288,8 +288,9 @@ class FilterResult:
         Times of the smoother nodes (:mod:`.store`): the filter epochs.
     P_filtered, P_predicted : (E, n, n) arrays
         ``P(e|e)`` and ``P(e|e-1)`` at the nodes.
-    Phi : (E, n, n) array
-        Error transition from node ``e-1`` (or the last high-rate sample before ``e``) to ``e``.
+    Phi : (E, n, n) array or None
+        Error transition from node ``e-1`` (or the last high-rate sample before ``e``) to
+        ``e``; kept only when the smoother runs (``config.smoother``), its only reader.
     feedback : (E, n) array
         Error estimate removed from the nominal at each node.
     P_smoothed : (E, n, n) array or None
@@ -441,7 +442,8 @@ class _Run:
         self.store = NodeStore(self.sched.n_epochs, n, model.n_par, self.sched.dense_samples,
                                0 if pat is None else pat[1].size,
                                0 if pat is None else pat[3].size,
-                               allocate=config.store_allocate)
+                               allocate=config.store_allocate,
+                               transitions=config.smoother)
         if config.extra_noise is not None and len(config.extra_noise):
             xn = config.extra_noise.reindex(columns=list(EXTRA_NOISE_COLS)).fillna(0.0)
             self.xn_t = np.asarray(xn.index, float)
@@ -750,7 +752,8 @@ def _finish(run: _Run, completed: int, error, t_start: float) -> FilterResult:
         timing=timing, layout=model.layout,
         epoch_times=store.t[:n_ok].copy(), P_filtered=store.Pf[:n_ok],
         P_predicted=store.Pp[:n_ok], feedback=store.fb[:n_ok], P_smoothed=Ps, error=error,
-        final=model.final_state(float(t_last)), params=store.par[:n_ok], Phi=store.Phi[:n_ok],
+        final=model.final_state(float(t_last)), params=store.par[:n_ok],
+        Phi=None if store.Phi is None else store.Phi[:n_ok],
         updates=updates, high_rate=high_rate, log=log, heading_reinits=list(run.reinits))
 
 

@@ -574,7 +574,8 @@ def assemble_output(
     out,
     X_hr,
     hr_node,
-    stds=True,
+    stds,
+    position_only,
 ):
     """IMU-rate output rows: nominal (optionally corrected) navigation state, stds, parameters.
 
@@ -598,9 +599,15 @@ def assemble_output(
     up, vel, roll pitch heading), then for each parameter state its value and its std.
     The corrected attitude is ``exp(-[phi x]) C``. ``stds=False`` (a smoothed run without
     smoothed covariances): the std columns are NaN and ``P_start``, ``P_end`` are not read.
+    ``position_only``: only ``lat lon height`` and ``east_std north_std up_std`` are written
+    (the same values; the other columns are left as they are): what the evaluation reads, a
+    fraction of the cost of a row (no attitude, its std or parameters).
     """
     n = P_start.shape[1]
     npar = n - 9
+    # the error and covariance entries a row needs: all, or position (velocity with it)
+    nx = 6 if position_only else n
+    nd = 3 if position_only else n
     x = np.zeros(n)
     pdiag = np.empty(n)
     Pa = np.empty((3, 3))
@@ -617,49 +624,62 @@ def assemble_output(
             if not correct:
                 continue
             i_hr = -1 - e
-            for a in range(n):
+            for a in range(nx):
                 x[a] = X_hr[i_hr, a]
             e = hr_node[i_hr]
             if not stds:
                 pass
             elif e >= n_nodes:  # after the last node (a stopped run): its covariance
                 e = n_nodes - 1
-                for a in range(n):
+                for a in range(nd):
                     pdiag[a] = P_start[e, a, a]
-                for a in range(3):
-                    for b in range(3):
-                        Pa[a, b] = P_start[e, 6 + a, 6 + b]
+                if not position_only:
+                    for a in range(3):
+                        for b in range(3):
+                            Pa[a, b] = P_start[e, 6 + a, 6 + b]
             else:
                 w = (t[j] - ep_t[e - 1]) / (ep_t[e] - ep_t[e - 1])
-                for a in range(n):
+                for a in range(nd):
                     pdiag[a] = (1.0 - w) * P_start[e - 1, a, a] + w * P_end[e, a, a]
-                for a in range(3):
-                    for b in range(3):
-                        Pa[a, b] = (1.0 - w) * P_start[e - 1, 6 + a, 6 + b] + w * P_end[e, 6 + a, 6 + b]
+                if not position_only:
+                    for a in range(3):
+                        for b in range(3):
+                            Pa[a, b] = (1.0 - w) * P_start[e - 1, 6 + a, 6 + b] + w * P_end[e, 6 + a, 6 + b]
             ep = -1
         elif out_post[j]:
-            for a in range(n):
-                if correct:
+            if correct:
+                for a in range(nx):
                     x[a] = X_start[e, a]
-                if stds:
-                    pdiag[a] = P_start[e, a, a]
             if stds:
-                for a in range(3):
-                    for b in range(3):
-                        Pa[a, b] = P_start[e, 6 + a, 6 + b]
+                for a in range(nd):
+                    pdiag[a] = P_start[e, a, a]
+                if not position_only:
+                    for a in range(3):
+                        for b in range(3):
+                            Pa[a, b] = P_start[e, 6 + a, 6 + b]
             ep = e
         else:
             w = (t[j] - ep_t[e - 1]) / (ep_t[e] - ep_t[e - 1])
-            for a in range(n):
-                if correct:
+            if correct:
+                for a in range(nx):
                     x[a] = (1.0 - w) * X_start[e - 1, a] + w * X_end[e, a]
-                if stds:
-                    pdiag[a] = (1.0 - w) * P_start[e - 1, a, a] + w * P_end[e, a, a]
             if stds:
-                for a in range(3):
-                    for b in range(3):
-                        Pa[a, b] = (1.0 - w) * P_start[e - 1, 6 + a, 6 + b] + w * P_end[e, 6 + a, 6 + b]
+                for a in range(nd):
+                    pdiag[a] = (1.0 - w) * P_start[e - 1, a, a] + w * P_end[e, a, a]
+                if not position_only:
+                    for a in range(3):
+                        for b in range(3):
+                            Pa[a, b] = (1.0 - w) * P_start[e - 1, 6 + a, 6 + b] + w * P_end[e, 6 + a, 6 + b]
             ep = e - 1
+        if position_only:
+            if correct:
+                correct_position_velocity(nav_in, j, x, out)
+            else:
+                for i in range(3):
+                    out[j, i] = nav_in[j, i]
+            for i in range(3):
+                out[j, 9 + i] = np.sqrt(max(pdiag[i], 0.0)) if stds else np.nan
+            continue
         _euler_dcm(nav_in[j, 6], nav_in[j, 7], nav_in[j, 8], C)
         if correct:
             correct_position_velocity(nav_in, j, x, out)

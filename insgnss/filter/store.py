@@ -6,7 +6,8 @@ A *node* is a time at which the engine keeps the error-state covariance: every f
 Node ``k`` holds
 
 - ``t[k]``: its time;
-- ``Phi[k]``: the error transition from node ``k-1`` to ``k`` (``Phi[0] = I``);
+- ``Phi[k]``: the error transition from node ``k-1`` to ``k`` (``Phi[0] = I``; kept only
+  for the smoother, its only reader);
 - ``Pp[k] = P(k|k-1)``: the predicted covariance the updates at ``k`` saw (after a gate
   recovery: the inflated one);
 - ``Pf[k] = P(k|k)``: the covariance after the updates;
@@ -103,16 +104,17 @@ class NodeStore:
     ``allocate(shape, dtype)`` makes the large arrays (covariances, transitions, update
     rows, high-rate samples; default :func:`numpy.empty`): a job passes
     :class:`insgnss.io.spill.SpillAllocator`, which maps them to a file beyond a memory
-    limit (``[filter] store_memory_mb``)."""
+    limit (``[filter] store_memory_mb``). ``transitions=False`` (a run without the smoother,
+    the only reader of ``Phi``): no ``Phi`` is kept (``None``), a third less to write per node."""
 
     def __init__(self, cap: int, n: int, n_par: int, cap_hr: int = 0, nnz: int = 0,
-                 nq: int = 0, rows: int = 64, allocate=None):
+                 nq: int = 0, rows: int = 64, allocate=None, transitions: bool = True):
         self.n = n
         self._allocate = alloc = np.empty if allocate is None else allocate
         self.t = np.empty(cap)
         self.Pf = alloc((cap, n, n), float)
         self.Pp = alloc((cap, n, n), float)
-        self.Phi = alloc((cap, n, n), float)
+        self.Phi = alloc((cap, n, n), float) if transitions else None
         self.fb = alloc((cap, n), float)
         self.fb[:] = 0.0
         self.par = alloc((cap, n_par), float)
@@ -194,7 +196,8 @@ class NodeStore:
     def close(self, k: int, t: float, Phi, Pp, Pf, fb, par) -> None:
         """Write node ``k``."""
         self.t[k] = t
-        self.Phi[k] = Phi
+        if self.Phi is not None:
+            self.Phi[k] = Phi
         self.Pp[k] = Pp
         self.Pf[k] = Pf
         if fb is None:
@@ -336,12 +339,13 @@ class Table:
                                        columns=self.columns, copy=False)
         return self._frame
 
-    def blocks(self):
-        """Row ranges ``(i, j)`` of about :data:`insgnss.io.spill.BLOCK_BYTES`; the pages of
-        a mapped block are given back when the next one is asked for."""
+    def blocks(self, start: int = 0, stop: int | None = None):
+        """Row ranges ``(i, j)`` of about :data:`insgnss.io.spill.BLOCK_BYTES` (those holding a
+        row of ``start .. stop-1``: :func:`insgnss.io.spill.blocks`); the pages of a mapped
+        block are given back when the next one is asked for."""
         from ..io.spill import blocks, release
 
-        for i, j in blocks(len(self), self.values[:1].nbytes or 8):
+        for i, j in blocks(len(self), self.values[:1].nbytes or 8, start=start, stop=stop):
             yield i, j
             release(self.values, i, j)
 
@@ -356,7 +360,10 @@ class Table:
         full = idx == list(range(len(self.columns)))
         rows = None if rows is None else np.asarray(rows, np.int64)
         out = np.empty((len(self) if rows is None else rows.size, len(idx)))
-        for i, j in self.blocks():
+        # the blocks the rows lie in only: a few rows of a long log visit one or two
+        span = (0, None) if rows is None else \
+            ((int(rows[0]), int(rows[-1]) + 1) if rows.size else (0, 0))
+        for i, j in self.blocks(*span):
             a, b = (i, j) if rows is None else np.searchsorted(rows, (i, j))
             if b > a:
                 out[a:b] = self._gather(i, j, None if rows is None else rows[a:b], idx, full)
@@ -431,8 +438,10 @@ class RowSegments:
 
 
 class AssembledTable(Table):
-    """A :class:`Table` whose rows are formed when they are read: ``assemble(index, out)``
-    writes the rows ``index`` (a slice or sorted row numbers) into ``out`` (rows, columns).
+    """A :class:`Table` whose rows are formed when they are read: ``assemble(index, out,
+    columns=None)`` writes the rows ``index`` (a slice or sorted row numbers) into ``out``
+    (rows, columns): every column, or at least the column numbers ``columns`` when they are
+    given (:meth:`take` of a few columns; the process model may then form only those).
 
     :meth:`take` forms only the rows asked for, block by block (:data:`insgnss.io.spill.
     BLOCK_BYTES` of rows at a time, ``release(i, j)`` called after each block so that mapped
@@ -463,16 +472,16 @@ class AssembledTable(Table):
             self._values = out
         return self._values
 
-    def _row_blocks(self):
+    def _row_blocks(self, start: int = 0, stop: int | None = None):
         from ..io.spill import blocks
 
-        return blocks(len(self), 8 * max(len(self.columns), 1))
+        return blocks(len(self), 8 * max(len(self.columns), 1), start=start, stop=stop)
 
-    def blocks(self):
+    def blocks(self, start: int = 0, stop: int | None = None):
         if self._values is not None:
-            yield from super().blocks()
+            yield from super().blocks(start, stop)
         else:
-            yield from self._row_blocks()
+            yield from self._row_blocks(start, stop)
 
     def _gather(self, i: int, j: int, r, idx: list[int], full: bool) -> np.ndarray:
         if self._values is not None:
@@ -482,7 +491,7 @@ class AssembledTable(Table):
         else:  # consecutive rows (the evaluation's): a slice, no gathered copies of the inputs
             sel = slice(int(r[0]), int(r[-1]) + 1) if r[-1] - r[0] + 1 == r.size else r
         block = np.empty((j - i if r is None else r.size, len(self.columns)))
-        self._assemble(sel, block)
+        self._assemble(sel, block, None if full else idx)  # the model may form only those
         self._release(i, j)
         return block if full else block[:, idx]
 

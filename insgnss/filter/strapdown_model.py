@@ -57,6 +57,11 @@ MODEL_LLF = 0
 _PATTERNS: dict = {}
 
 
+#: the columns the assembly of a row can form alone (``kernels.assemble_output``,
+#: ``position_only``): what the evaluation of the positions reads
+POSITION_COLUMNS = ("lat", "lon", "height", "east_std", "north_std", "up_std")
+
+
 def output_columns(layout: StateLayout) -> list[str]:
     """Columns of the IMU-rate tables: NAV_COLS, STD_COLS, parameter values, their stds."""
     par = layout.labels[9:]
@@ -312,7 +317,7 @@ class StrapdownModel(ProcessModelBase):
             for i, j in spill.blocks(n_rows, table[:1].nbytes):
                 kernels.assemble_output(t[i:j], table[i:j], seg[i:j], post[i:j], ep_t,
                                         store.Pf, store.Pp, none, none, par, j - i, False,
-                                        table[i:j], none, hr_node, True)
+                                        table[i:j], none, hr_node, True, False)
                 spill.release(table, i, j)
             return Table(t[:n_rows], table[:n_rows], cols)
         Xp, Xm, Ps, xs_hr = smoothed
@@ -320,10 +325,13 @@ class StrapdownModel(ProcessModelBase):
         stds = Ps is not None  # without smoothed covariances the std columns are NaN
         segments = RowSegments(seg, post, n_rows)  # not the per-row arrays (store.py)
 
-        def assemble(rows, out):
+        position = {cols.index(c) for c in POSITION_COLUMNS}
+
+        def assemble(rows, out, columns=None):
             seg_r, post_r = segments.rows(rows)
             kernels.assemble_output(t[rows], table[rows], seg_r, post_r, ep_t, P, P, Xp, Xm,
-                                    par, out.shape[0], True, out, xs_hr, hr_node, stds)
+                                    par, out.shape[0], True, out, xs_hr, hr_node, stds,
+                                    columns is not None and set(columns) <= position)
 
         def release(i, j):
             """Give back the pages of mapped inputs that rows ``i .. j-1`` read: their

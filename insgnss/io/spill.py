@@ -141,12 +141,16 @@ def release_frame(df, start: int = 0, stop: int | None = None) -> None:
         release(df.iloc[:, c].to_numpy(), start, stop)
 
 
-def blocks(n: int, row_bytes: int, block_bytes: int | None = None):
+def blocks(n: int, row_bytes: int, block_bytes: int | None = None, start: int = 0,
+           stop: int | None = None):
     """Row ranges ``(i, j)`` covering ``0 .. n-1`` in blocks of about ``block_bytes`` bytes
-    (default :data:`BLOCK_BYTES`) of rows of ``row_bytes`` bytes each."""
+    (default :data:`BLOCK_BYTES`) of rows of ``row_bytes`` bytes each; only the blocks that
+    hold a row of ``start .. stop-1`` (default: all), with the same bounds as all of them."""
+    n, start = int(n), max(int(start), 0)
+    stop = n if stop is None else min(int(stop), n)
     step = max(1, int(block_bytes or BLOCK_BYTES) // max(int(row_bytes), 1))
-    for i in range(0, int(n), step):
-        yield i, min(i + step, int(n))
+    for i in range(start // step * step, stop if stop > start else 0, step):
+        yield i, min(i + step, n)
 
 
 def trim_heap() -> None:

@@ -22,7 +22,7 @@ import numpy as np
 import pandas as pd
 
 from ..config import Job
-from ..evaluate import move_point, outage_metrics, position_errors
+from ..evaluate import enu_errors, move_point, outage_metrics
 from .inputs import Inputs
 from .result import JobResult
 
@@ -89,14 +89,13 @@ def reference_errors(sol, inputs: Inputs, block: int = REFERENCE_BLOCK) -> pd.Da
             sd = sd[:, :len(stds)]
         pt = move_point(part, inputs.lever_arm) if inputs.reference_point == "antenna" \
             else part
-        e = position_errors(pt, ref.iloc[a:b])
-        enu[a:b] = e[["east", "north", "up"]].to_numpy(float)
-        values[a:b, 3] = e["horizontal"].to_numpy(float)
+        enu[a:b] = enu_errors(pt, ref.iloc[a:b])  # (evaluate.position_errors' array)
+        np.hypot(enu[a:b, 0], enu[a:b, 1], out=values[a:b, 3])
         tp = part.index.to_numpy(float)
         for k, c in enumerate(stds):
             sd[a:b, k] = np.interp(tr[a:b], tp, part[c].to_numpy(float))
         release_frame(ref, a, b)
-        del part, pt, e
+        del part, pt
     return pd.DataFrame(values[:, :4 + len(stds)], index=ref.index,
                         columns=["east", "north", "up", "horizontal", *stds], copy=False)
 
