@@ -785,7 +785,7 @@ SCHEMA: dict[str, Any] = {
                                  "and parameter states (re-linearized; prior sigmas kept), "
                                  "which makes the forward solution non-causal",
                                  check=_integer(1), when=_on("filter.smoother")),
-        "store_memory_mb": _spec(_NUM, 16.0, "memory [MiB] for the engine's stored arrays (the "
+        "store_memory_mb": _spec(_NUM, 64.0, "memory [MiB] for the engine's stored arrays (the "
                                  "smoother's per-epoch store, the IMU-rate forward and smoothed "
                                  "tables) and, counted apart, for the long input arrays (IMU "
                                  "triads, a native reference); beyond it they are memory-mapped "
