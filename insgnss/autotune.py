@@ -231,7 +231,7 @@ def tune(run: Callable[[dict], pd.DataFrame | None], parameters: Sequence[Parame
     run_many : callable, optional
         ``run_many([theta, ...]) -> [innovations, ...]``: ``run`` of several parameter sets
         that do not depend on each other (the two sides of a line search or of the polish,
-        the observability tests), e.g. in parallel (:func:`insgnss.executors.fork_map`). The
+        the observability tests), e.g. in parallel (:class:`insgnss.executors.ForkedHelpers`). The
         search evaluates the same points either way, so the result is the same.
     """
     params = list(parameters)

@@ -257,16 +257,17 @@ def forked_tuning():
     import multiprocessing
 
     from insgnss import executors
-    from insgnss.job import tuning
 
     helpers = []
+    batch = executors.ForkedHelpers.map
 
-    def counted(fn, items):
-        helpers.append(executors.fork_workers(len(items)))
-        return executors.fork_map(fn, items)
+    def counted(self, items):
+        items = list(items)
+        helpers.append(min(len(self._start()), len(items) - 1) if len(items) > 1 else 0)
+        return batch(self, items)
 
     with pytest.MonkeyPatch.context() as mp:
-        mp.setattr(tuning, "fork_map", counted)
+        mp.setattr(executors.ForkedHelpers, "map", counted)
         if "fork" in multiprocessing.get_all_start_methods():
             mp.setattr(executors, "usable_cores", lambda: 2)
         return _run(True), helpers

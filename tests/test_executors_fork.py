@@ -101,3 +101,50 @@ def test_no_helpers_inside_a_pool_task(monkeypatch):
         (o,) = pool.run(_helpers_in_task, [(10,)])
     assert o.ok and o.value == 0
     assert executors._HELPERS  # this process still may
+
+
+@needs_fork
+def test_forked_helpers_serve_many_batches_with_the_serial_values():
+    """:class:`insgnss.executors.ForkedHelpers`: helpers forked once (the same processes for
+    every batch), the values of the serial loop in the items' order, one item alone computed
+    here; after close the helpers are gone."""
+    data = {"offset": 3}
+
+    def add(x):  # a closure over local data: inherited at the fork, not pickled
+        time.sleep(0.01)
+        return x + data["offset"], os.getpid()
+
+    with executors.ForkedHelpers(add, workers=2) as helpers:
+        batches = [helpers.map(range(k, k + 7)) for k in (0, 10, 20)]
+        procs = [p for p, _ in helpers._helpers]
+        assert helpers.map([5]) == [(8, os.getpid())]
+    for k, out in zip((0, 10, 20), batches, strict=True):
+        assert [v for v, _ in out] == [x + 3 for x in range(k, k + 7)]
+    pids = [{p for _, p in out} for out in batches]
+    assert pids[0] == pids[1] == pids[2] and len(pids[0]) == 3 and os.getpid() in pids[0]
+    assert len(procs) == 2 and not any(p.is_alive() for p in procs)
+
+
+@needs_fork
+def test_forked_helpers_raise_here_and_make_up_for_a_dead_helper():
+    parent = os.getpid()
+
+    def fail_on_odd(x):
+        if x % 2:
+            raise _Unpicklable(x, why="odd")
+        return x
+
+    with executors.ForkedHelpers(fail_on_odd, workers=1) as helpers:
+        assert helpers.map([0, 2, 4, 6]) == [0, 2, 4, 6]
+        with pytest.raises(_Unpicklable, match="item 1: odd"):
+            helpers.map([0, 1, 2, 3])  # item 1 went to the helper: raised again here
+
+    def die_in_helper(x):
+        if os.getpid() != parent:
+            os.kill(os.getpid(), signal.SIGKILL)
+        return -x
+
+    with executors.ForkedHelpers(die_in_helper, workers=1) as helpers:
+        assert helpers.map(range(6)) == [0, -1, -2, -3, -4, -5]
+        assert helpers._helpers == []  # not replaced: the next batches run here
+        assert helpers.map(range(3)) == [0, -1, -2]

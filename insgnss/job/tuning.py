@@ -41,7 +41,7 @@ from ..autotune import COAST_SUFFIX, Parameter, TuneResult, tune
 from ..config import Job
 from ..earth import ecef_to_enu_vectors, geodetic_to_ecef
 from ..errors import ConfigError, InsgnssError
-from ..executors import fork_map
+from ..executors import ForkedHelpers
 from ..imu import ImuErrorModel
 from ..preprocess import shift_time
 from .context import RunContext
@@ -260,9 +260,9 @@ def autotune(ctx: RunContext, model: ImuErrorModel, run_one, build_aiding
     Work done once, not per filter run: the time-shifted inputs per offset value and the
     production GNSS position model per set of GNSS scales and offset. The runs the search
     needs together (the two sides of a bracket) run at once on the further cores
-    (:func:`insgnss.executors.fork_map`: forked helpers, deterministic runs, so the same
-    result as one after the other). The result records the filter runs of each stage and the
-    wall time (``seconds``).
+    (:class:`insgnss.executors.ForkedHelpers`: helpers forked once for the whole search,
+    deterministic runs, so the same result as one after the other). The result records the
+    filter runs of each stage and the wall time (``seconds``).
     """
     params = parameters(ctx, model)
     if not params:
@@ -313,9 +313,16 @@ def autotune(ctx: RunContext, model: ImuErrorModel, run_one, build_aiding
     def cached_many(thetas):  # independent new runs: on the further cores (forked helpers)
         keys = [key(th) for th in thetas]
         todo = {k: th for k, th in zip(keys, thetas, strict=True) if k not in cache}
-        cache.update(zip(todo, fork_map(run, list(todo.values())), strict=True))
+        cache.update(zip(todo, helpers.map(list(todo.values())), strict=True))
         return [cache[k] for k in keys]
 
+    with ForkedHelpers(run) as helpers:  # forked at the first pair, kept for the search
+        return _search(ctx, params, tuning, cached, cached_many)
+
+
+def _search(ctx: RunContext, params: list[Parameter], tuning: list, cached, cached_many):
+    """The two stages of :func:`autotune` over the filter runs ``cached(theta)`` and
+    ``cached_many(thetas)``: ``(theta, result)``."""
     t_start = time.perf_counter()
     sweeps = int(ctx.job["filter"]["autotune_sweeps"])
     log = lambda line: _log.info("autotune: %s", line)  # noqa: E731
