@@ -556,6 +556,29 @@ def correct_position_velocity(nav, j, x, out):
         out[j, 3 + i] = nav[j, 3 + i] - x[3 + i]
 
 
+@njit(cache=True, inline="always")
+def _node_covariance(P, e, nd, attitude, pdiag, Pa):
+    """The first ``nd`` variances of node ``e`` into ``pdiag`` and (``attitude``) its
+    attitude block into ``Pa`` (:func:`assemble_output`)."""
+    for a in range(nd):
+        pdiag[a] = P[e, a, a]
+    if attitude:
+        for a in range(3):
+            for b in range(3):
+                Pa[a, b] = P[e, 6 + a, 6 + b]
+
+
+@njit(cache=True, inline="always")
+def _interpolated_covariance(P_start, P_end, e, w, nd, attitude, pdiag, Pa):
+    """:func:`_node_covariance` of ``(1 - w) P_start[e-1] + w P_end[e]``."""
+    for a in range(nd):
+        pdiag[a] = (1.0 - w) * P_start[e - 1, a, a] + w * P_end[e, a, a]
+    if attitude:
+        for a in range(3):
+            for b in range(3):
+                Pa[a, b] = (1.0 - w) * P_start[e - 1, 6 + a, 6 + b] + w * P_end[e, 6 + a, 6 + b]
+
+
 @entry
 @njit(cache=True)
 def assemble_output(
@@ -631,32 +654,17 @@ def assemble_output(
                 pass
             elif e >= n_nodes:  # after the last node (a stopped run): its covariance
                 e = n_nodes - 1
-                for a in range(nd):
-                    pdiag[a] = P_start[e, a, a]
-                if not position_only:
-                    for a in range(3):
-                        for b in range(3):
-                            Pa[a, b] = P_start[e, 6 + a, 6 + b]
+                _node_covariance(P_start, e, nd, not position_only, pdiag, Pa)
             else:
                 w = (t[j] - ep_t[e - 1]) / (ep_t[e] - ep_t[e - 1])
-                for a in range(nd):
-                    pdiag[a] = (1.0 - w) * P_start[e - 1, a, a] + w * P_end[e, a, a]
-                if not position_only:
-                    for a in range(3):
-                        for b in range(3):
-                            Pa[a, b] = (1.0 - w) * P_start[e - 1, 6 + a, 6 + b] + w * P_end[e, 6 + a, 6 + b]
+                _interpolated_covariance(P_start, P_end, e, w, nd, not position_only, pdiag, Pa)
             ep = -1
         elif out_post[j]:
             if correct:
                 for a in range(nx):
                     x[a] = X_start[e, a]
             if stds:
-                for a in range(nd):
-                    pdiag[a] = P_start[e, a, a]
-                if not position_only:
-                    for a in range(3):
-                        for b in range(3):
-                            Pa[a, b] = P_start[e, 6 + a, 6 + b]
+                _node_covariance(P_start, e, nd, not position_only, pdiag, Pa)
             ep = e
         else:
             w = (t[j] - ep_t[e - 1]) / (ep_t[e] - ep_t[e - 1])
@@ -664,12 +672,7 @@ def assemble_output(
                 for a in range(nx):
                     x[a] = (1.0 - w) * X_start[e - 1, a] + w * X_end[e, a]
             if stds:
-                for a in range(nd):
-                    pdiag[a] = (1.0 - w) * P_start[e - 1, a, a] + w * P_end[e, a, a]
-                if not position_only:
-                    for a in range(3):
-                        for b in range(3):
-                            Pa[a, b] = (1.0 - w) * P_start[e - 1, 6 + a, 6 + b] + w * P_end[e, 6 + a, 6 + b]
+                _interpolated_covariance(P_start, P_end, e, w, nd, not position_only, pdiag, Pa)
             ep = e - 1
         if position_only:
             if correct:
