@@ -415,6 +415,14 @@ def _serve(conn, fn) -> None:
         conn.close()
 
 
+def _end(proc, wait: float) -> None:
+    """Wait ``wait`` seconds for a helper process to exit, then terminate it."""
+    proc.join(wait)
+    if proc.is_alive():
+        proc.terminate()
+        proc.join()
+
+
 class ForkedHelpers:
     """:func:`fork_map` for many small batches of one function: helper processes forked once,
     at the first batch of two or more items, that compute ``fn(item)`` for every later
@@ -480,10 +488,7 @@ class ForkedHelpers:
 
     def _drop(self, proc, conn) -> None:
         conn.close()
-        proc.join(0.1)
-        if proc.is_alive():
-            proc.terminate()
-            proc.join()
+        _end(proc, 0.1)
         self._helpers = [h for h in self._helpers if h[0] is not proc]
 
     def close(self) -> None:
@@ -496,10 +501,7 @@ class ForkedHelpers:
                 pass
             conn.close()
         for proc, _ in helpers:
-            proc.join(1.0)
-            if proc.is_alive():
-                proc.terminate()
-                proc.join()
+            _end(proc, 1.0)
 
     def __enter__(self) -> ForkedHelpers:
         return self

@@ -224,11 +224,17 @@ def chi2_ppf(p, dof):
     float or ndarray
         ``x`` with ``P(X <= x) = p``; ``inf`` at ``p = 1``, NaN outside the domain.
     """
+    if type(p) in _SCALARS and type(dof) in _SCALARS:  # a gate, per epoch: no arrays
+        return _chi2_ppf_one(float(p), float(dof))
     p, k = np.broadcast_arrays(np.asarray(p, float), np.asarray(dof, float))
     if p.size == 1:  # a gate or a bound: the same few (p, dof) over and over
         x = _chi2_ppf_one(float(p.flat[0]), float(k.flat[0]))
         return x if p.ndim == 0 else np.full(p.shape, x)
     return _chi2_ppf(p, k)
+
+
+#: Python number types :func:`chi2_ppf` takes without making arrays
+_SCALARS = (float, int)
 
 
 @functools.lru_cache(maxsize=1024)

@@ -60,12 +60,12 @@ REJECT, ACCEPT, RECOVER = 0, 1, 2
 
 
 class GateTable:
-    """Chi-square thresholds per (probability, dof), computed once and cached."""
+    """Chi-square thresholds per (probability, dof) (:func:`insgnss.stats.chi2_ppf` solves each
+    once)."""
 
     def __init__(self, default: float | None, per_type: dict | None = None):
         self.default = default
         self.per_type = dict(per_type or {})
-        self._cache: dict = {}
 
     def probability(self, m) -> float | None:
         """Gating probability of measurement model ``m`` (its own, per type, or default)."""
@@ -78,11 +78,7 @@ class GateTable:
         """``chi2.ppf(p, dof)``; ``inf`` when gating is disabled (``p`` None or 0)."""
         if not p:
             return np.inf
-        key = (p, dof)
-        thr = self._cache.get(key)
-        if thr is None:
-            thr = self._cache[key] = float(chi2_ppf(p, dof))
-        return thr
+        return chi2_ppf(float(p), int(dof))  # remembered there (one solve per (p, dof))
 
 
 @njit(cache=True)
