@@ -314,9 +314,15 @@ def test_two_process_runs_half_a_second_apart(tmp_path, sim_job, wait):
     out = tmp_path / "out"
     cmd = [sys.executable, "-m", "insgnss.cli", "process", str(sim_job), "-o", str(out),
            "--no-progress"] + (["--wait"] if wait else [])
+    t0 = time.monotonic()
     first = subprocess.Popen(cmd + ["--seed", "1"], stdout=subprocess.PIPE,
                              stderr=subprocess.PIPE, text=True, env=ENV)
-    time.sleep(0.5)
+    # half a second, and the first holds the folder: on a loaded machine its start-up alone
+    # can take longer, and a second run started before it would simply come first
+    while not (out / LOCK_NAME).exists() and first.poll() is None \
+            and time.monotonic() - t0 < 60:
+        time.sleep(0.01)
+    time.sleep(max(0.0, 0.5 - (time.monotonic() - t0)))
     second = subprocess.Popen(cmd + ["--seed", "2"], stdout=subprocess.PIPE,
                               stderr=subprocess.PIPE, text=True, env=ENV)
     r1, r2 = first.communicate(timeout=600), second.communicate(timeout=600)
